@@ -1,0 +1,1 @@
+"""Warp kernels of the tile processor (installed as ``tpnet_gpu.kernels``)."""

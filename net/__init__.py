@@ -1,0 +1,1 @@
+"""TPNET in PyTorch (installed as ``tpnet_gpu.net``)."""
