@@ -13,8 +13,7 @@ import numpy as np
 from tpnet_gpu import reference as ref
 from tpnet_gpu import tables
 
-# Ideal quad offsets r_i in units of the baseline (x right, y down), cameras 0 TL, 1 TR, 2 BL, 3 BR.
-QUAD_OFFSETS = np.array([[-0.5, -0.5], [0.5, -0.5], [-0.5, 0.5], [0.5, 0.5]])
+QUAD_OFFSETS = np.array(tables.QUAD_OFFSETS)
 
 
 def _textured_views(rng: np.random.Generator, size: int, disparity: float) -> np.ndarray:

@@ -30,12 +30,18 @@ QUADRANTS = ("CC", "SC", "CS", "SS")
 QUAD_PAIRS = ((0, 1), (2, 3), (0, 2), (1, 3), (0, 3), (2, 1))
 QUAD_PAIR_NAMES = ("hor-top", "hor-bottom", "vert-left", "vert-right", "diag-main", "diag-other")
 
+# Ideal quad: camera offsets r_i from the virtual centre camera in baselines (x right, y down), cameras
+# 0 top-left, 1 top-right, 2 bottom-left, 3 bottom-right; camera i sees a centre-camera point c at c - d r_i
+# (geometry_and_lma.md A.1, A.2).
+QUAD_OFFSETS = ((-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5))
+
 # Correlation defaults of the GPU path (tile_processor.md §6.5).
 CORR_COLOUR_WEIGHTS = (0.25, 0.25, 0.5)  # R, B, G
 CORR_FAT_ZERO = 30.0  # absolute, in units of the accumulated product
 CORR_SIGMA_RB = 0.5  # LPF applied after R+B are accumulated
 CORR_SIGMA = 0.9  # LPF applied after normalisation (colour)
 CORR_SIGMA_MONO = 0.15
+NET_CORR_OFFSET = 0.1  # corr_offset of the pair combination for the network layers (network.md §1)
 
 # Bayer: green is prescaled so every colour has density weight 1/4 (tile_processor.md §1.1).
 GREEN_PRESCALE = 0.5
@@ -96,6 +102,22 @@ def dtt2e_matrix(sine: bool) -> np.ndarray:
     lag = m + 1 if sine else m
     arg = np.outer(lag, omega())
     return 0.5 * (np.sin(arg) if sine else np.cos(arg))
+
+
+def unfold_matrix(sine: bool, radius: int) -> np.ndarray:
+    """Lag unfold of a DCT-II-e / DST-II-e output, ``(2r+1, 8)`` [lag + r, index] (§6.3).
+
+    The cosine part is even (lag m reads index |m|), the sine part odd (lag m reads index |m| - 1 with the
+    sign of m; lag 0 reads nothing).
+    """
+    lags = np.arange(-radius, radius + 1)
+    u = np.zeros((2 * radius + 1, DTT_SIZE))
+    if sine:
+        nz = lags != 0
+        u[np.nonzero(nz)[0], np.abs(lags[nz]) - 1] = np.sign(lags[nz])
+    else:
+        u[np.arange(2 * radius + 1), np.abs(lags)] = 1.0
+    return u
 
 
 def lpf(sigma: float) -> np.ndarray:

@@ -4,7 +4,7 @@ Readable, one function per step; it is the oracle the fast kernels are tested ag
 by the fast path.
 """
 
-from tpnet_gpu.reference.correlation import corr_to_pixels, correlate, correlate_fd, crop_centre
+from tpnet_gpu.reference.correlation import corr_to_pixels, correlate, correlate_fd, crop_centre, network_layers
 from tpnet_gpu.reference.mclt import (
     bayer_planes,
     convert_tiles,
@@ -27,6 +27,6 @@ from tpnet_gpu.reference.transforms import dct2e, dct4, dst2e, dst4, dtt4
 __all__ = [
     "bayer_planes", "bconj", "bmul", "convert_tiles", "corr_to_pixels", "correlate", "correlate_fd",
     "correlation_product", "crop_centre", "dct2e", "dct4", "dst2e", "dst4", "dtt4", "dtt4_2d",
-    "extract_windows", "fold", "imclt", "kernel_to_clt", "mclt", "mclt_prerotation", "overlap_add",
+    "extract_windows", "fold", "imclt", "kernel_to_clt", "mclt", "network_layers", "mclt_prerotation", "overlap_add",
     "pair_clamp", "rotate", "shifted_window", "split_centre", "tile_centres",
 ]

@@ -54,18 +54,6 @@ def correlate_fd(
     return acc * tables.lpf(sigma_corr)
 
 
-def _unfold_matrix(sine: bool, radius: int) -> np.ndarray:
-    """Lag unfold ``(2r+1, 8)``: cosine part even (lag m reads index |m|), sine part odd (index |m|-1, sign m)."""
-    lags = np.arange(-radius, radius + 1)
-    u = np.zeros((2 * radius + 1, tables.DTT_SIZE))
-    if sine:
-        nz = lags != 0
-        u[np.nonzero(nz)[0], np.abs(lags[nz]) - 1] = np.sign(lags[nz])
-    else:
-        u[np.arange(2 * radius + 1), np.abs(lags)] = 1.0
-    return u
-
-
 def corr_to_pixels(x, radius: int = tables.CORR_RADIUS) -> np.ndarray:
     """Correlation spectrum ``(..., 4, 8, 8)`` to the pixel-domain correlation ``(..., 2r+1, 2r+1)`` (§6.3).
 
@@ -77,7 +65,7 @@ def corr_to_pixels(x, radius: int = tables.CORR_RADIUS) -> np.ndarray:
         raise ValueError(f"radius: expected 0..{tables.CORR_RADIUS}, got {radius}")
     x = np.asarray(x, dtype=np.float64)
     t = (tables.dtt2e_matrix(sine=False), tables.dtt2e_matrix(sine=True))
-    u = (_unfold_matrix(False, radius), _unfold_matrix(True, radius))
+    u = (tables.unfold_matrix(False, radius), tables.unfold_matrix(True, radius))
     a = (u[0] @ t[0], u[1] @ t[1])  # (2r+1, 8): transform then unfold, per axis
     return 0.25 * sum(a[q >> 1] @ x[..., q, :, :] @ a[q & 1].T for q in range(4))
 
@@ -94,3 +82,25 @@ def crop_centre(corr, radius: int = tables.NET_RADIUS) -> np.ndarray:
 def correlate(first, second, *, radius: int = tables.CORR_RADIUS, **kwargs) -> np.ndarray:
     """Pixel-domain phase correlation ``(..., 2r+1, 2r+1)`` of CLT tile pairs ``(..., C, 4, 8, 8)``."""
     return corr_to_pixels(correlate_fd(first, second, **kwargs), radius)
+
+
+def network_layers(corr, pairs=tables.QUAD_PAIRS, *, offset: float = tables.NET_CORR_OFFSET) -> np.ndarray:
+    """The network's 4 correlation layers ``(..., 4, 9, 9)`` from the quad's 6 pair tiles ``(..., 6, S, S)``.
+
+    network.md §1 / geometry_and_lma.md B.5: [hor, vert, diag-main, diag-other] where hor = combine(pair 0,
+    pair 1), vert = combine(pair 2, pair 3) (not transposed), and combine(a, b) = sqrt((a + o)(b + o)) - o if
+    a > 0 and b > 0 else 0 (o = ``offset``; o < 0 gives the plain mean (a + b) / 2). Centre 9x9 of each.
+    """
+    if tuple(map(tuple, pairs)) != tables.QUAD_PAIRS:
+        raise ValueError(f"pairs: the network layers need the quad's 6 pairs {tables.QUAD_PAIRS}, got {pairs}")
+    c = crop_centre(np.asarray(corr, dtype=np.float64), tables.NET_RADIUS)
+
+    def combine(a, b):
+        if offset < 0:
+            return 0.5 * (a + b)
+        both = (a > 0) & (b > 0)
+        return np.where(both, np.sqrt(np.maximum((a + offset) * (b + offset), 0.0)) - offset, 0.0)
+
+    parts = [combine(c[..., 0, :, :], c[..., 1, :, :]), combine(c[..., 2, :, :], c[..., 3, :, :]),
+             c[..., 4, :, :], c[..., 5, :, :]]
+    return np.stack(parts, axis=-3)

@@ -1,0 +1,171 @@
+"""Convert: raw frames -> frequency-domain (CLT) tiles, one thread block per tile (tile_processor.md §1.4, §3-§5).
+
+For each camera of a tile: integer window pick from the pair-clamped padded frame, then per colour the Bayer
+mask, and the forward MCLT as two small matrix products per quadrant with the closed-form basis of §3.1 /
+§13 (shifted half-sine window, fold, DCT-IV/DST-IV and the phase rotation by the residual s in one 8x16
+matrix per axis), then the optional aberration-kernel product (bicomplex, §5.2; it commutes with the rotation).
+
+Layouts: ``clt`` is (tiles * cams * colours * 4, 8, 8) = [tile, cam, colour, q] flattened (Warp arrays have at
+most 4 dimensions; torch views it as (tiles, cams, colours, 4, 8, 8)).
+"""
+
+import warp as wp
+
+from tpnet_gpu.kernels.frames import CENTRE_LIMIT, HALF_WINDOW, window_corner
+
+wp.set_module_options({"enable_backward": False})
+
+
+# --- element functions --------------------------------------------------------------------------------------
+@wp.func
+def basis_cos(k: float, n: float, s: float) -> float:
+    """1/2 w(n + s) cos(omega_k (n + s + 4.5)); the integer part of the phase is reduced exactly mod 2 pi."""
+    whole = wp.mod((2.0 * k + 1.0) * (2.0 * n + 9.0), 64.0)
+    angle = wp.pi * whole / 32.0 + wp.pi * (2.0 * k + 1.0) * s / 16.0
+    return 0.5 * wp.sin(wp.pi * (2.0 * (n + s) + 1.0) / 32.0) * wp.cos(angle)
+
+
+@wp.func
+def basis_sin(k: float, n: float, s: float) -> float:
+    """1/2 w(n + s) sin(omega_k (n + s + 4.5))."""
+    whole = wp.mod((2.0 * k + 1.0) * (2.0 * n + 9.0), 64.0)
+    angle = wp.pi * whole / 32.0 + wp.pi * (2.0 * k + 1.0) * s / 16.0
+    return 0.5 * wp.sin(wp.pi * (2.0 * (n + s) + 1.0) / 32.0) * wp.sin(angle)
+
+
+@wp.func
+def finite_or_zero(v: float) -> float:
+    if wp.isfinite(v):
+        return v
+    return 0.0
+
+
+@wp.func
+def non_finite(v: float) -> float:
+    if wp.isfinite(v):
+        return 0.0
+    return 1.0
+
+
+# Bicomplex product K * F per frequency (§5.2), one function per output quadrant.
+@wp.func
+def kmul_cc(k0: float, k1: float, k2: float, k3: float, f0: float, f1: float, f2: float, f3: float) -> float:
+    return k0 * f0 - k1 * f1 - k2 * f2 + k3 * f3
+
+
+@wp.func
+def kmul_sc(k0: float, k1: float, k2: float, k3: float, f0: float, f1: float, f2: float, f3: float) -> float:
+    return k0 * f1 + k1 * f0 - k2 * f3 - k3 * f2
+
+
+@wp.func
+def kmul_cs(k0: float, k1: float, k2: float, k3: float, f0: float, f1: float, f2: float, f3: float) -> float:
+    return k0 * f2 + k2 * f0 - k1 * f3 - k3 * f1
+
+
+@wp.func
+def kmul_ss(k0: float, k1: float, k2: float, k3: float, f0: float, f1: float, f2: float, f3: float) -> float:
+    return k0 * f3 + k3 * f0 + k1 * f2 + k2 * f1
+
+
+@wp.func
+def kernel_node(position: float, nodes: int) -> int:
+    """Nearest kernel-grid node (node n centred at pixel 16 n - 8), clamped to the grid."""
+    return wp.clamp(int(wp.floor(position / 16.0)) + 1, 0, nodes - 1)
+
+
+# --- kernel -------------------------------------------------------------------------------------------------
+@wp.kernel
+def convert_tiles(
+    padded: wp.array3d(dtype=wp.float32),
+    centres: wp.array3d(dtype=wp.float32),
+    active: wp.array(dtype=wp.bool),
+    masks: wp.array3d(dtype=wp.float32),
+    k_rows: wp.array2d(dtype=wp.float32),
+    n_rows: wp.array2d(dtype=wp.float32),
+    n_cols: wp.array2d(dtype=wp.float32),
+    k_cols: wp.array2d(dtype=wp.float32),
+    kernels: wp.array3d(dtype=wp.float32),
+    kernel_rows: int,
+    kernel_cols: int,
+    use_kernels: bool,
+    image_height: int,
+    image_width: int,
+    colours: int,
+    clt: wp.array3d(dtype=wp.float32),
+    finite: wp.array(dtype=wp.bool),
+    valid: wp.array(dtype=wp.bool),
+):
+    """One block per tile. padded: (cams, H + 36, W + 36); centres: (tiles, cams, 2); masks: (4 * colours, 16, 16)
+    [parity_y, parity_x, colour]; k_rows/n_rows: (8, 16) and n_cols/k_cols: (16, 8) index tables; kernels:
+    (cams * kernel_rows * kernel_cols * colours * 4, 8, 8); clt out as in the module docstring; finite/valid:
+    (tiles,) - finite: every window and centre finite (else the tile's CLT is zero); valid: finite, active and
+    every window wholly inside the image (else its pixels were read pair-clamped)."""
+    tile = wp.tid()
+    if not active[tile]:
+        finite[tile] = False
+        valid[tile] = False
+        return
+    cams = centres.shape[1]
+    all_finite = bool(True)
+    all_inside = bool(True)
+    kr = wp.tile_load(k_rows, shape=(8, 16))
+    nr = wp.tile_load(n_rows, shape=(8, 16))
+    nc = wp.tile_load(n_cols, shape=(16, 8))
+    kc = wp.tile_load(k_cols, shape=(16, 8))
+    for cam in range(cams):
+        cx = centres[tile, cam, 0]
+        cy = centres[tile, cam, 1]
+        if not (wp.isfinite(cx) and wp.isfinite(cy)):
+            all_finite = False
+            cx = 0.0
+            cy = 0.0
+        px = wp.clamp(cx, -CENTRE_LIMIT, CENTRE_LIMIT) - float(HALF_WINDOW)
+        py = wp.clamp(cy, -CENTRE_LIMIT, CENTRE_LIMIT) - float(HALF_WINDOW)
+        itl_x = int(wp.floor(px + 0.5))
+        itl_y = int(wp.floor(py + 0.5))
+        sx = float(itl_x) - px
+        sy = float(itl_y) - py
+        if itl_x < 0 or itl_y < 0 or itl_x + 16 > image_width or itl_y + 16 > image_height:
+            all_inside = False
+        window = wp.tile_load(
+            padded[cam], shape=(16, 16), offset=(window_corner(itl_y, image_height), window_corner(itl_x, image_width))
+        )
+        bad = wp.tile_sum(wp.tile_map(non_finite, window))
+        if wp.tile_extract(bad, 0) > 0.0:
+            all_finite = False
+        window = wp.tile_map(finite_or_zero, window)
+        # Per-axis bases: rows (8, 16) for the vertical transform, transposed (16, 8) for the horizontal one.
+        v_cos = wp.tile_map(basis_cos, kr, nr, wp.tile_full(shape=(8, 16), value=sy, dtype=wp.float32))
+        v_sin = wp.tile_map(basis_sin, kr, nr, wp.tile_full(shape=(8, 16), value=sy, dtype=wp.float32))
+        h_cos = wp.tile_map(basis_cos, kc, nc, wp.tile_full(shape=(16, 8), value=sx, dtype=wp.float32))
+        h_sin = wp.tile_map(basis_sin, kc, nc, wp.tile_full(shape=(16, 8), value=sx, dtype=wp.float32))
+        parity = (itl_y & 1) * 2 + (itl_x & 1)
+        kny = kernel_node(cy, kernel_rows)
+        knx = kernel_node(cx, kernel_cols)
+        for colour in range(colours):
+            x = wp.tile_map(wp.mul, window, wp.tile_load(masks[parity * colours + colour], shape=(16, 16)))
+            t_cos = wp.tile_matmul(x, h_cos)  # (16, 8): horizontal cosine transform of every row
+            t_sin = wp.tile_matmul(x, h_sin)
+            f0 = wp.tile_matmul(v_cos, t_cos)  # CC
+            f1 = wp.tile_matmul(v_cos, t_sin)  # SC
+            f2 = wp.tile_matmul(v_sin, t_cos)  # CS
+            f3 = wp.tile_matmul(v_sin, t_sin)  # SS
+            out = ((tile * cams + cam) * colours + colour) * 4
+            if use_kernels:
+                kb = (((cam * kernel_rows + kny) * kernel_cols + knx) * colours + colour) * 4
+                k0 = wp.tile_load(kernels[kb + 0], shape=(8, 8))
+                k1 = wp.tile_load(kernels[kb + 1], shape=(8, 8))
+                k2 = wp.tile_load(kernels[kb + 2], shape=(8, 8))
+                k3 = wp.tile_load(kernels[kb + 3], shape=(8, 8))
+                wp.tile_store(clt[out + 0], wp.tile_map(kmul_cc, k0, k1, k2, k3, f0, f1, f2, f3))
+                wp.tile_store(clt[out + 1], wp.tile_map(kmul_sc, k0, k1, k2, k3, f0, f1, f2, f3))
+                wp.tile_store(clt[out + 2], wp.tile_map(kmul_cs, k0, k1, k2, k3, f0, f1, f2, f3))
+                wp.tile_store(clt[out + 3], wp.tile_map(kmul_ss, k0, k1, k2, k3, f0, f1, f2, f3))
+            else:
+                wp.tile_store(clt[out + 0], f0)
+                wp.tile_store(clt[out + 1], f1)
+                wp.tile_store(clt[out + 2], f2)
+                wp.tile_store(clt[out + 3], f3)
+    finite[tile] = all_finite
+    valid[tile] = all_finite and all_inside

@@ -1,0 +1,139 @@
+"""TileProcessor host class: zero-copy hand-off to torch, owned buffers, input handling and bad input.
+Oracles: the golden reference (values) and Warp's own buffer pointers (zero-copy)."""
+
+import subprocess
+import sys
+import textwrap
+import threading
+
+import numpy as np
+import pytest
+import torch
+
+from tests.kernels.oracle import reference_clt, relative_error
+from tpnet_gpu.config import CorrelationConfig
+from tpnet_gpu.processor import TileProcessor
+
+H, W = 32, 48
+
+
+@pytest.fixture
+def frames():
+    return np.random.default_rng(30).uniform(0, 4000, size=(4, H, W)).astype(np.float32)
+
+
+def test_results_share_the_warp_buffers(device, frames):
+    tp = TileProcessor(H, W, device=device)
+    out = tp.process(frames, 1.0)
+    assert out.corr.data_ptr() == tp._corr.ptr and out.clt.data_ptr() == tp._clt.ptr
+    assert out.layers.data_ptr() == tp._layers.ptr and out.valid.data_ptr() == tp._valid.ptr
+    assert out.corr.device == tp.torch_device and out.valid.dtype == torch.bool
+    again = tp.process(frames, 2.0)  # no allocation per frame: the same buffers again
+    assert again.corr.data_ptr() == out.corr.data_ptr()
+
+
+def test_float32_torch_input_is_read_in_place(device, frames):
+    tp = TileProcessor(H, W, device=device)
+    t = torch.from_numpy(frames).to(tp.torch_device)
+    assert tp._frames_array(t).ptr == t.data_ptr()  # zero-copy view, not the staging buffer
+    assert tp._frames_array(frames.astype(np.uint16)).ptr == tp._frames.ptr  # other dtypes: staged
+
+
+@pytest.mark.parametrize("dtype", [np.uint16, np.float64, np.int32])
+def test_any_real_dtype_gives_the_same_result(device, frames, dtype):
+    tp = TileProcessor(H, W, device=device)
+    data = np.round(frames).astype(dtype)
+    out = tp.process(data, 0.5)
+    want = reference_clt(np.round(frames), out.centres.cpu().numpy(), "GRBG")
+    assert relative_error(out.clt, want) <= 1e-5
+
+
+def test_active_mask_skips_tiles(device, frames):
+    tp = TileProcessor(H, W, config=CorrelationConfig(fat_zero=0.0), device=device)
+    active = np.zeros((H // 8, W // 8), dtype=bool)
+    active[1:3, 1:4] = True
+    out = tp.process(frames, 0.0, active=active)
+    corr = out.corr.cpu().numpy().reshape(H // 8, W // 8, 6, 15, 15)
+    assert np.all(corr[~active] == 0) and np.all(np.abs(corr[active]).max(axis=(1, 2, 3)) > 0)
+    np.testing.assert_array_equal(out.valid.cpu().numpy().reshape(active.shape), active)
+
+
+def test_two_threads_do_not_crash(frames):
+    # Warp CPU tile kernels abort when launched concurrently (platform.md §1); the processor serialises them.
+    tps = [TileProcessor(H, W, device="cpu") for _ in range(2)]
+    errors = []
+
+    def work(tp):
+        try:
+            for _ in range(5):
+                tp.process(frames, 1.0)
+        except Exception as exc:  # pragma: no cover - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=work, args=(tp,)) for tp in tps]
+    [t.start() for t in threads]
+    [t.join() for t in threads]
+    assert not errors
+
+
+def test_off_image_windows_never_read_out_of_bounds_in_debug_mode(tmp_path):
+    # Warp's debug mode turns on array bounds checks; an out-of-bounds read aborts the process.
+    script = tmp_path / "debug_run.py"
+    script.write_text(textwrap.dedent("""
+        import numpy as np, warp as wp
+        wp.config.mode = "debug"
+        from tpnet_gpu.processor import TileProcessor
+        rng = np.random.default_rng(0)
+        tp = TileProcessor(32, 48, device="cpu")
+        d = rng.uniform(-200, 200, size=(4, 6)).astype(np.float32)
+        d[0, 0] = 1e9
+        out = tp.process(rng.uniform(0, 100, size=(4, 32, 48)).astype(np.float32), d)
+        assert np.isfinite(out.corr.numpy()).all()
+        print("debug-ok", int(out.valid.numpy().sum()))
+    """))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "debug-ok" in done.stdout
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, match",
+    [
+        (dict(height=30, width=48), ValueError, "height: expected a multiple of 8 that is at least 16, got 30"),
+        (dict(height=32, width=8), ValueError, "width: expected a multiple of 8 that is at least 16, got 8"),
+        (dict(cfa="RGB"), ValueError, r"cfa: expected one of \['BGGR', 'GBRG', 'GRBG', 'RGGB'\], got 'RGB'"),
+        (dict(pairs=[(0, 4)]), ValueError, r"pairs: expected distinct camera indices in 0..3, got \(0, 4\)"),
+        (dict(pairs=[]), ValueError, "pairs: expected at least one"),
+        (dict(camera_offsets=[(0, 0, 0)]), ValueError, r"camera_offsets: expected shape \(cams >= 2, 2\)"),
+        (dict(kernels=np.zeros((4, 3, 4, 8))), ValueError, r"kernels: expected shape \(cams=4, \[rows, cols,\] colours=3"),
+        (dict(config=CorrelationConfig(colour_weights=(1.0,))), ValueError, "colour_weights: expected 3 values, got 1"),
+        (dict(config=CorrelationConfig(fat_zero=-1.0)), ValueError, "fat_zero >= 0 and sigmas > 0 expected"),
+    ],
+)
+def test_bad_construction(kwargs, error, match):
+    args = dict(height=H, width=W, device="cpu")
+    args.update(kwargs)
+    with pytest.raises(error, match=match):
+        TileProcessor(args.pop("height"), args.pop("width"), **args)
+
+
+def test_bad_frames_and_tasks(frames):
+    tp = TileProcessor(H, W, device="cpu")
+    with pytest.raises(ValueError, match=r"frames: expected shape \(4, 32, 48\) \(cams, height, width\), got \(3, 32, 48\)"):
+        tp.process(frames[:3], 0.0)
+    with pytest.raises(ValueError, match=r"frames: expected shape \(4, 32, 48\).*got \(4, 48, 32\)"):
+        tp.process(np.ascontiguousarray(frames.transpose(0, 2, 1)), 0.0)
+    with pytest.raises(TypeError, match="frames: expected real pixel values .* got torch.complex64"):
+        tp.process(torch.zeros((4, H, W), dtype=torch.complex64), 0.0)
+    with pytest.raises(TypeError, match="frames: expected a torch tensor or numpy array, got list"):
+        tp.process([[0.0]], 0.0)
+    with pytest.raises(ValueError, match=r"target_disparity: expected shape \(4, 6\) \(tiles_y, tiles_x\), got \(6, 4\)"):
+        tp.process(frames, np.zeros((6, 4), dtype=np.float32))
+    with pytest.raises(TypeError, match="target_disparity: expected a floating-point dtype, got torch.int64"):
+        tp.process(frames, np.zeros((4, 6), dtype=np.int64))
+    with pytest.raises(ValueError, match="process: give exactly one of target_disparity and centres"):
+        tp.process(frames)
+    with pytest.raises(ValueError, match=r"centres: expected shape \(24, 4, 2\)"):
+        tp.process(frames, centres=np.zeros((24, 4)))
+    with pytest.raises(ValueError, match="active: expected a bool mask of 24 tiles"):
+        tp.process(frames, 0.0, active=np.ones((4, 6), dtype=np.int32))

@@ -1,0 +1,324 @@
+"""The tile processor's host class: owns every device buffer and launches the Warp kernels.
+
+Built once for (image size, cameras, pairs, colours, kernels, device); ``process`` only copies or maps the
+inputs and launches. Results are torch tensors that share memory with the Warp buffers (``wp.to_torch``) on
+the processor's device: they are overwritten by the next call (clone them to keep a frame's results).
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import warp as wp
+
+from tpnet_gpu import tables
+from tpnet_gpu.config import CorrelationConfig
+from tpnet_gpu.kernels import convert, correlate, frames
+from tpnet_gpu.warp_setup import default_device, init_warp
+
+# Warp's CPU tile kernels share one scratch arena: two concurrent launches abort the process (platform.md §1).
+_CPU_LAUNCH_LOCK = threading.Lock()
+CUDA_BLOCK_DIM = 64
+
+
+@dataclass(frozen=True)
+class TileResult:
+    """Outputs of one ``TileProcessor.process`` call (views of the processor's buffers).
+
+    Attributes:
+        clt: ``(tiles, cams, colours, 4, 8, 8)`` frequency-domain tiles (CC, SC, CS, SS; colours R, B, G).
+            Stale for inactive tiles, zero-filled windows where pixels were not finite.
+        corr: ``(tiles, pairs, 15, 15)`` pair correlations, row = vertical lag + 7; zero where not computed.
+        layers: ``(tiles, 4, 9, 9)`` network layers [hor, vert, diag-main, diag-other], or None unless the
+            pairs are the quad's 6.
+        valid: ``(tiles,)`` bool: active, every centre and window pixel finite, and every window wholly inside
+            the image. Tiles with windows partly off the image still get values computed from pair-clamped
+            pixels; tiles with non-finite input or inactive tiles get zero correlations.
+        centres: ``(tiles, cams, 2)`` the per-camera tile centres (x, y) used, pixels.
+    """
+
+    clt: torch.Tensor
+    corr: torch.Tensor
+    layers: torch.Tensor | None
+    valid: torch.Tensor
+    centres: torch.Tensor
+
+
+def _as_tuple_pairs(pairs, cams: int) -> tuple[tuple[int, int], ...]:
+    out = tuple((int(a), int(b)) for a, b in pairs)
+    if not out:
+        raise ValueError("pairs: expected at least one (first, second) camera pair, got none")
+    for a, b in out:
+        if not (0 <= a < cams and 0 <= b < cams) or a == b:
+            raise ValueError(f"pairs: expected distinct camera indices in 0..{cams - 1}, got {(a, b)}")
+    return out
+
+
+class TileProcessor:
+    """Tile processor for frames of ``height`` x ``width`` pixels (multiples of 8, at least 16).
+
+    Args:
+        height, width: frame size in pixels.
+        camera_offsets: ``(cams, 2)`` offsets r_i of the cameras from the virtual centre camera in baselines
+            (x right, y down); camera i sees a tile at c - d r_i. Default: the ideal quad.
+        pairs: camera pairs (first, second) to correlate; default the quad's 6 in the spec's order.
+        cfa: 2x2 Bayer pattern of the raw frames ("GRBG", "RGGB", "BGGR", "GBRG"), or None for mono.
+        kernels: optional aberration kernels in CLT form, ``(cams, colours, 4, 8, 8)`` (one per camera and
+            colour) or ``(cams, rows, cols, colours, 4, 8, 8)`` on the 16-px kernel grid (node n at 16 n - 8).
+        config: correlation parameters.
+        device: Warp device ("cpu", "cuda", "cuda:0"); default cuda when present.
+    """
+
+    def __init__(
+        self,
+        height: int,
+        width: int,
+        *,
+        camera_offsets=tables.QUAD_OFFSETS,
+        pairs=tables.QUAD_PAIRS,
+        cfa: str | None = tables.DEFAULT_CFA,
+        kernels=None,
+        config: CorrelationConfig = CorrelationConfig(),
+        device: str | None = None,
+    ):
+        for name, value in (("height", height), ("width", width)):
+            if not isinstance(value, (int, np.integer)) or value < 16 or value % 8:
+                raise ValueError(f"{name}: expected a multiple of 8 that is at least 16, got {value!r}")
+        offsets = np.asarray(camera_offsets, dtype=np.float32)
+        if offsets.ndim != 2 or offsets.shape[1] != 2 or offsets.shape[0] < 2:
+            raise ValueError(f"camera_offsets: expected shape (cams >= 2, 2), got {offsets.shape}")
+        init_warp()
+        self.device = wp.get_device(device or default_device())
+        self.torch_device = torch.device(wp.device_to_torch(self.device))
+        self.height, self.width = int(height), int(width)
+        self.tiles_y, self.tiles_x = self.height // 8, self.width // 8
+        self.tiles = self.tiles_y * self.tiles_x
+        self.cams = offsets.shape[0]
+        self.pairs = _as_tuple_pairs(pairs, self.cams)
+        self.cfa = cfa
+        self.colours = 1 if cfa is None else 3
+        if cfa is not None:
+            tables.cfa_red_position(cfa)  # validates the name
+        self.config = config.resolved(self.colours)
+        self.block_dim = 1 if self.device.is_cpu else CUDA_BLOCK_DIM
+        self._allocate(offsets)
+        self._load_kernels(kernels)
+
+    # --- set-up ------------------------------------------------------------------------------------------
+    def _array(self, data, dtype=wp.float32) -> wp.array:
+        return wp.array(np.ascontiguousarray(data), dtype=dtype, device=self.device)
+
+    def _allocate(self, offsets: np.ndarray) -> None:
+        d, cams, tiles, colours, npairs = self.device, self.cams, self.tiles, self.colours, len(self.pairs)
+        pad = 2 * frames.PAD
+        self._frames = wp.zeros((cams, self.height, self.width), dtype=wp.float32, device=d)  # input staging
+        self._padded = wp.zeros((cams, self.height + pad, self.width + pad), dtype=wp.float32, device=d)
+        self._disparity = wp.zeros((self.tiles_y, self.tiles_x), dtype=wp.float32, device=d)
+        self._active = wp.ones(tiles, dtype=wp.bool, device=d)
+        self._all_active = wp.ones(tiles, dtype=wp.bool, device=d)
+        self._centres = wp.zeros((tiles, cams, 2), dtype=wp.float32, device=d)
+        self._clt = wp.zeros((tiles * cams * colours * 4, 8, 8), dtype=wp.float32, device=d)
+        self._finite = wp.zeros(tiles, dtype=wp.bool, device=d)
+        self._valid = wp.zeros(tiles, dtype=wp.bool, device=d)
+        self._corr = wp.zeros((tiles * npairs, correlate.CORR_SIDE, correlate.CORR_SIDE), dtype=wp.float32, device=d)
+        self._layers = None
+        if self.pairs == tables.QUAD_PAIRS:
+            self._layers = wp.zeros((tiles, 4, correlate.NET_SIDE, correlate.NET_SIDE), dtype=wp.float32, device=d)
+        # Constant tables, all from tpnet_gpu.tables.
+        self._offsets = wp.array(offsets, dtype=wp.vec2f, device=d)
+        self._pairs = self._array(np.array(self.pairs, dtype=np.int32), dtype=wp.int32)
+        self._masks = self._array(self._colour_masks())
+        k = np.arange(8, dtype=np.float32)
+        n = np.arange(16, dtype=np.float32)
+        self._k_rows = self._array(np.broadcast_to(k[:, None], (8, 16)))
+        self._n_rows = self._array(np.broadcast_to(n[None, :], (8, 16)))
+        self._n_cols = self._array(np.broadcast_to(n[:, None], (16, 8)))
+        self._k_cols = self._array(np.broadcast_to(k[None, :], (16, 8)))
+        cfg = self.config
+        self._colour_weights = self._array(np.array(cfg.colour_weights, dtype=np.float32))
+        self._lpf_rb = self._array(tables.lpf(cfg.sigma_rb))
+        self._lpf_corr = self._array(tables.lpf(cfg.sigma_corr))
+        lags = [0.5 * tables.unfold_matrix(s, tables.CORR_RADIUS) @ tables.dtt2e_matrix(s) for s in (False, True)]
+        self._lags_cos, self._lags_sin = (self._array(m) for m in lags)
+        self._freqs_cos, self._freqs_sin = (self._array(m.T) for m in lags)
+        # Torch views of the outputs (zero-copy; made once).
+        self._result = TileResult(
+            clt=wp.to_torch(self._clt).view(tiles, cams, colours, 4, 8, 8),
+            corr=wp.to_torch(self._corr).view(tiles, npairs, correlate.CORR_SIDE, correlate.CORR_SIDE),
+            layers=None if self._layers is None else wp.to_torch(self._layers),
+            valid=wp.to_torch(self._valid),
+            centres=wp.to_torch(self._centres),
+        )
+        self._frames_t = wp.to_torch(self._frames)
+        self._disparity_t = wp.to_torch(self._disparity)
+        self._centres_t = self._result.centres
+        self._active_t = wp.to_torch(self._active)
+
+    def _colour_masks(self) -> np.ndarray:
+        """(4 * colours, 16, 16) colour masks per window-corner parity [py, px, colour]; G carries its 0.5."""
+        if self.cfa is None:
+            return np.ones((4, 16, 16), dtype=np.float32)
+        scale = np.array([1.0, 1.0, tables.GREEN_PRESCALE])
+        masks = np.zeros((2, 2, 3, 16, 16), dtype=np.float32)
+        colour = tables.cfa_colour_index(self.cfa, 18, 18)
+        for py in range(2):
+            for px in range(2):
+                window = colour[py : py + 16, px : px + 16]
+                for c in range(3):
+                    masks[py, px, c] = np.where(window == c, scale[c], 0.0)
+        return masks.reshape(12, 16, 16)
+
+    def _load_kernels(self, kernels) -> None:
+        if kernels is None:
+            self._kernels = wp.zeros((4, 8, 8), dtype=wp.float32, device=self.device)  # unused placeholder
+            self._kernel_grid = (1, 1)
+            self._use_kernels = False
+            return
+        k = kernels.detach().cpu().numpy() if isinstance(kernels, torch.Tensor) else np.asarray(kernels)
+        expected = f"(cams={self.cams}, [rows, cols,] colours={self.colours}, 4, 8, 8)"
+        if k.ndim == 5:
+            k = k[:, None, None]
+        if k.ndim != 7 or k.shape[0] != self.cams or k.shape[3:] != (self.colours, 4, 8, 8):
+            raise ValueError(f"kernels: expected shape {expected}, got {tuple(k.shape)}")
+        if not np.all(np.isfinite(k)):
+            raise ValueError("kernels: expected finite values, got NaN or infinity")
+        self._kernel_grid = (k.shape[1], k.shape[2])
+        self._use_kernels = True
+        self._kernels = self._array(k.reshape(-1, 8, 8).astype(np.float32))
+
+    # --- inputs --------------------------------------------------------------------------------------------
+    def _frames_array(self, frames_in) -> wp.array:
+        shape = (self.cams, self.height, self.width)
+        if isinstance(frames_in, np.ndarray):
+            frames_in = torch.from_numpy(frames_in)
+        if not isinstance(frames_in, torch.Tensor):
+            raise TypeError(f"frames: expected a torch tensor or numpy array, got {type(frames_in).__name__}")
+        if tuple(frames_in.shape) != shape:
+            raise ValueError(f"frames: expected shape {shape} (cams, height, width), got {tuple(frames_in.shape)}")
+        if frames_in.dtype.is_complex or frames_in.dtype == torch.bool:
+            raise TypeError(f"frames: expected real pixel values (float or integer), got {frames_in.dtype}")
+        if (
+            frames_in.dtype == torch.float32
+            and frames_in.device == self.torch_device
+            and frames_in.is_contiguous()
+        ):
+            return wp.from_torch(frames_in, requires_grad=False)  # zero-copy
+        self._frames_t.copy_(frames_in)  # into the preallocated staging buffer (converts dtype and device)
+        return self._frames
+
+    def _set_disparity(self, target_disparity) -> None:
+        shape = (self.tiles_y, self.tiles_x)
+        if isinstance(target_disparity, (int, float, np.floating, np.integer)):
+            self._disparity_t.fill_(float(target_disparity))
+            return
+        if isinstance(target_disparity, np.ndarray):
+            target_disparity = torch.from_numpy(target_disparity)
+        if not isinstance(target_disparity, torch.Tensor):
+            raise TypeError(
+                f"target_disparity: expected a number, torch tensor or numpy array, got {type(target_disparity).__name__}"
+            )
+        if tuple(target_disparity.shape) != shape:
+            raise ValueError(
+                f"target_disparity: expected shape {shape} (tiles_y, tiles_x), got {tuple(target_disparity.shape)}"
+            )
+        if not target_disparity.dtype.is_floating_point:
+            raise TypeError(f"target_disparity: expected a floating-point dtype, got {target_disparity.dtype}")
+        self._disparity_t.copy_(target_disparity)
+
+    def _set_centres(self, centres) -> None:
+        shape = (self.tiles, self.cams, 2)
+        if isinstance(centres, np.ndarray):
+            centres = torch.from_numpy(centres)
+        if not isinstance(centres, torch.Tensor) or tuple(centres.shape) != shape:
+            got = tuple(centres.shape) if hasattr(centres, "shape") else type(centres).__name__
+            raise ValueError(f"centres: expected shape {shape} (tiles, cams, x/y), got {got}")
+        if not centres.dtype.is_floating_point:
+            raise TypeError(f"centres: expected a floating-point dtype, got {centres.dtype}")
+        self._centres_t.copy_(centres)
+
+    def _active_array(self, active) -> wp.array:
+        if active is None:
+            return self._all_active
+        if isinstance(active, np.ndarray):
+            active = torch.from_numpy(active)
+        if not isinstance(active, torch.Tensor) or active.dtype != torch.bool or active.numel() != self.tiles:
+            got = f"{active.dtype} of shape {tuple(active.shape)}" if isinstance(active, torch.Tensor) else type(active)
+            raise ValueError(f"active: expected a bool mask of {self.tiles} tiles (tiles_y, tiles_x), got {got}")
+        self._active_t.copy_(active.reshape(-1))
+        return self._active
+
+    # --- per frame -------------------------------------------------------------------------------------------
+    def process(self, frames_in, target_disparity=None, *, centres=None, active=None) -> TileResult:
+        """Convert and correlate one set of camera frames.
+
+        Args:
+            frames_in: ``(cams, height, width)`` raw frames (Bayer mosaics in ``cfa``, or mono), torch tensor
+                on any device or numpy array, any real dtype. A float32 contiguous tensor on the processor's
+                device is read in place; anything else is copied into the processor's staging buffer.
+            target_disparity: a number or ``(tiles_y, tiles_x)`` target disparities (px) of the ideal rig;
+                NaN masks the tile. Give this or ``centres``.
+            centres: ``(tiles, cams, 2)`` per-camera tile centres (x, y) in pixels, e.g. from a calibrated
+                camera model; NaN masks the tile.
+            active: optional ``(tiles_y, tiles_x)`` bool mask of tiles to process.
+
+        Returns:
+            TileResult of torch tensors on the processor's device (views, overwritten by the next call).
+        """
+        if (target_disparity is None) == (centres is None):
+            raise ValueError("process: give exactly one of target_disparity and centres")
+        frames_wp = self._frames_array(frames_in)
+        active_wp = self._active_array(active)
+        with _CPU_LAUNCH_LOCK:
+            if centres is None:
+                self._set_disparity(target_disparity)
+                wp.launch(
+                    frames.ideal_tile_centres,
+                    dim=(self.tiles_y, self.tiles_x, self.cams),
+                    inputs=[self._disparity, self._offsets],
+                    outputs=[self._centres],
+                    device=self.device,
+                )
+            else:
+                self._set_centres(centres)
+            self._launch(frames_wp, active_wp)
+        return self._result
+
+    def _launch(self, frames_wp: wp.array, active_wp: wp.array) -> None:
+        d = self.device
+        wp.launch(frames.pad_frames, dim=self._padded.shape, inputs=[frames_wp], outputs=[self._padded], device=d)
+        wp.launch_tiled(
+            convert.convert_tiles,
+            dim=[self.tiles],
+            inputs=[
+                self._padded, self._centres, active_wp, self._masks, self._k_rows, self._n_rows, self._n_cols,
+                self._k_cols, self._kernels, self._kernel_grid[0], self._kernel_grid[1],
+                self._use_kernels,
+                self.height, self.width, self.colours,
+            ],
+            outputs=[self._clt, self._finite, self._valid],
+            block_dim=self.block_dim,
+            device=d,
+        )
+        cfg = self.config
+        wp.launch_tiled(
+            correlate.correlate_tiles,
+            dim=[self.tiles],
+            inputs=[
+                self._clt, self._finite, self._pairs, self.cams, self.colours, self._colour_weights, cfg.fat_zero,
+                self._lpf_rb, self._lpf_corr, self._lags_cos, self._lags_sin, self._freqs_cos, self._freqs_sin,
+            ],
+            outputs=[self._corr],
+            block_dim=self.block_dim,
+            device=d,
+        )
+        if self._layers is not None:
+            wp.launch(
+                correlate.network_layers,
+                dim=self._layers.shape,
+                inputs=[self._corr, cfg.net_offset],
+                outputs=[self._layers],
+                device=d,
+            )
