@@ -156,6 +156,7 @@ class TileProcessor:
         self._disparity_t = wp.to_torch(self._disparity)
         self._centres_t = self._result.centres
         self._active_t = wp.to_torch(self._active)
+        self._active_in = self._all_active
 
     def _colour_masks(self) -> np.ndarray:
         """(4 * colours, 16, 16) colour masks per window-corner parity [py, px, colour]; G carries its 0.5."""
@@ -267,58 +268,71 @@ class TileProcessor:
         Returns:
             TileResult of torch tensors on the processor's device (views, overwritten by the next call).
         """
+        self.prepare(frames_in, target_disparity, centres=centres, active=active)
+        self.convert()
+        self.correlate()
+        return self._result
+
+    # --- stages (public so benchmarks can time them; ``process`` runs them in order) ----------------------------
+    def prepare(self, frames_in, target_disparity=None, *, centres=None, active=None) -> None:
+        """Stage 0: map or copy the inputs, pad the frames (pair clamp) and compute the tile centres."""
         if (target_disparity is None) == (centres is None):
             raise ValueError("process: give exactly one of target_disparity and centres")
         frames_wp = self._frames_array(frames_in)
-        active_wp = self._active_array(active)
+        self._active_in = self._active_array(active)
+        if centres is None:
+            self._set_disparity(target_disparity)
+        else:
+            self._set_centres(centres)
+        d = self.device
         with _CPU_LAUNCH_LOCK:
             if centres is None:
-                self._set_disparity(target_disparity)
                 wp.launch(
                     frames.ideal_tile_centres,
                     dim=(self.tiles_y, self.tiles_x, self.cams),
                     inputs=[self._disparity, self._offsets],
                     outputs=[self._centres],
+                    device=d,
+                )
+            wp.launch(frames.pad_frames, dim=self._padded.shape, inputs=[frames_wp], outputs=[self._padded], device=d)
+
+    def convert(self) -> None:
+        """Stage 1: padded frames and centres -> CLT tiles, finite and valid masks."""
+        with _CPU_LAUNCH_LOCK:
+            wp.launch_tiled(
+                convert.convert_tiles,
+                dim=[self.tiles],
+                inputs=[
+                    self._padded, self._centres, self._active_in, self._masks, self._k_rows, self._n_rows,
+                    self._n_cols, self._k_cols, self._kernels, self._kernel_grid[0], self._kernel_grid[1],
+                    self._use_kernels, self.height, self.width, self.colours,
+                ],
+                outputs=[self._clt, self._finite, self._valid],
+                block_dim=self.block_dim,
+                device=self.device,
+            )
+
+    def correlate(self) -> None:
+        """Stage 2: CLT tiles -> pair correlations (and the network layers for the quad's pairs)."""
+        cfg = self.config
+        with _CPU_LAUNCH_LOCK:
+            wp.launch_tiled(
+                correlate.correlate_tiles,
+                dim=[self.tiles],
+                inputs=[
+                    self._clt, self._finite, self._pairs, self.cams, self.colours, self._colour_weights,
+                    cfg.fat_zero, self._lpf_rb, self._lpf_corr, self._lags_cos, self._lags_sin, self._freqs_cos,
+                    self._freqs_sin,
+                ],
+                outputs=[self._corr],
+                block_dim=self.block_dim,
+                device=self.device,
+            )
+            if self._layers is not None:
+                wp.launch(
+                    correlate.network_layers,
+                    dim=self._layers.shape,
+                    inputs=[self._corr, cfg.net_offset],
+                    outputs=[self._layers],
                     device=self.device,
                 )
-            else:
-                self._set_centres(centres)
-            self._launch(frames_wp, active_wp)
-        return self._result
-
-    def _launch(self, frames_wp: wp.array, active_wp: wp.array) -> None:
-        d = self.device
-        wp.launch(frames.pad_frames, dim=self._padded.shape, inputs=[frames_wp], outputs=[self._padded], device=d)
-        wp.launch_tiled(
-            convert.convert_tiles,
-            dim=[self.tiles],
-            inputs=[
-                self._padded, self._centres, active_wp, self._masks, self._k_rows, self._n_rows, self._n_cols,
-                self._k_cols, self._kernels, self._kernel_grid[0], self._kernel_grid[1],
-                self._use_kernels,
-                self.height, self.width, self.colours,
-            ],
-            outputs=[self._clt, self._finite, self._valid],
-            block_dim=self.block_dim,
-            device=d,
-        )
-        cfg = self.config
-        wp.launch_tiled(
-            correlate.correlate_tiles,
-            dim=[self.tiles],
-            inputs=[
-                self._clt, self._finite, self._pairs, self.cams, self.colours, self._colour_weights, cfg.fat_zero,
-                self._lpf_rb, self._lpf_corr, self._lags_cos, self._lags_sin, self._freqs_cos, self._freqs_sin,
-            ],
-            outputs=[self._corr],
-            block_dim=self.block_dim,
-            device=d,
-        )
-        if self._layers is not None:
-            wp.launch(
-                correlate.network_layers,
-                dim=self._layers.shape,
-                inputs=[self._corr, cfg.net_offset],
-                outputs=[self._layers],
-                device=d,
-            )
