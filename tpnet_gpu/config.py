@@ -39,3 +39,39 @@ class CorrelationConfig:
             )
         return CorrelationConfig(tuple(float(w) for w in weights), float(self.fat_zero), float(self.sigma_rb),
                                  float(sigma), float(self.net_offset))
+
+
+@dataclass(frozen=True)
+class TextureConfig:
+    """Texture parameters (tile_processor.md §7.3). ``None`` picks the spec default for the colour count:
+    low-pass sigmas (R, B, G) = (0.9, 0.9, 0.6) or (0.4,) for mono; comparison weights (0.294, 0.118, 0.588)
+    or (1,). ``diff_sigma`` and ``min_shot`` are in the processor's units (~1/4 of raw values), as in the
+    original, which presumed its sensors' range: scale them with the data."""
+
+    lpf_sigmas: tuple[float, ...] | None = None
+    colour_weights: tuple[float, ...] | None = None
+    diff_sigma: float = tables.TEXTURE_DIFF_SIGMA
+    min_shot: float = tables.TEXTURE_MIN_SHOT
+    scale_shot: float = tables.TEXTURE_SCALE_SHOT
+    dust_remove: bool = True
+    output_gain: float = tables.TEXTURE_OUTPUT_GAIN
+
+    def resolved(self, colours: int) -> TextureConfig:
+        """A copy with the ``None`` defaults filled in for ``colours`` (1 or 3); checks counts and signs."""
+        sigmas = self.lpf_sigmas
+        if sigmas is None:
+            sigmas = tables.TEXTURE_SIGMAS if colours == 3 else (tables.TEXTURE_SIGMA_MONO,)
+        weights = self.colour_weights
+        if weights is None:
+            weights = tables.TEXTURE_COLOUR_WEIGHTS if colours == 3 else (1.0,)
+        if len(sigmas) != colours or len(weights) != colours:
+            raise ValueError(
+                f"lpf_sigmas, colour_weights: expected {colours} values each, got {len(sigmas)} and {len(weights)}"
+            )
+        if self.diff_sigma <= 0 or self.min_shot <= 0 or min(sigmas) <= 0:
+            raise ValueError(
+                f"diff_sigma, min_shot and lpf_sigmas must be > 0, got {self.diff_sigma}, {self.min_shot}, {sigmas}"
+            )
+        return TextureConfig(tuple(map(float, sigmas)), tuple(map(float, weights)), float(self.diff_sigma),
+                             float(self.min_shot), float(self.scale_shot), bool(self.dust_remove),
+                             float(self.output_gain))

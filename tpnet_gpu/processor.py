@@ -15,8 +15,8 @@ import torch
 import warp as wp
 
 from tpnet_gpu import tables
-from tpnet_gpu.config import CorrelationConfig
-from tpnet_gpu.kernels import convert, correlate, frames
+from tpnet_gpu.config import CorrelationConfig, TextureConfig
+from tpnet_gpu.kernels import convert, correlate, frames, texture
 from tpnet_gpu.warp_setup import default_device, init_warp
 
 # Warp's CPU tile kernels share one scratch arena: two concurrent launches abort the process (platform.md §1).
@@ -38,6 +38,10 @@ class TileResult:
             the image. Tiles with windows partly off the image still get values computed from pair-clamped
             pixels; tiles with non-finite input or inactive tiles get zero correlations.
         centres: ``(tiles, cams, 2)`` the per-camera tile centres (x, y) used, pixels.
+        texture: ``(4, H, W)`` R, G, B, alpha (mono: ``(2, H, W)`` Y, alpha) overlap-added textures of the
+            tiles with finite input, or None unless the processor was built with ``textures=True``. Colours are
+            x ``output_gain`` (raw units); alpha ~1 where the cameras agree, ~0 where they do not or where no
+            tile contributed (an empty texture is all zero).
     """
 
     clt: torch.Tensor
@@ -45,6 +49,7 @@ class TileResult:
     layers: torch.Tensor | None
     valid: torch.Tensor
     centres: torch.Tensor
+    texture: torch.Tensor | None
 
 
 def _as_tuple_pairs(pairs, cams: int) -> tuple[tuple[int, int], ...]:
@@ -69,6 +74,8 @@ class TileProcessor:
         kernels: optional aberration kernels in CLT form, ``(cams, colours, 4, 8, 8)`` (one per camera and
             colour) or ``(cams, rows, cols, colours, 4, 8, 8)`` on the 16-px kernel grid (node n at 16 n - 8).
         config: correlation parameters.
+        textures: also make the RGBA texture image in ``process`` (allocates its buffers).
+        texture_config: texture parameters.
         device: Warp device ("cpu", "cuda", "cuda:0"); default cuda when present.
     """
 
@@ -82,6 +89,8 @@ class TileProcessor:
         cfa: str | None = tables.DEFAULT_CFA,
         kernels=None,
         config: CorrelationConfig = CorrelationConfig(),
+        textures: bool = False,
+        texture_config: TextureConfig = TextureConfig(),
         device: str | None = None,
     ):
         for name, value in (("height", height), ("width", width)):
@@ -103,6 +112,8 @@ class TileProcessor:
         if cfa is not None:
             tables.cfa_red_position(cfa)  # validates the name
         self.config = config.resolved(self.colours)
+        self.textures = bool(textures)
+        self.texture_config = texture_config.resolved(self.colours)
         self.block_dim = 1 if self.device.is_cpu else CUDA_BLOCK_DIM
         self._allocate(offsets)
         self._load_kernels(kernels)
@@ -144,6 +155,7 @@ class TileProcessor:
         lags = [0.5 * tables.unfold_matrix(s, tables.CORR_RADIUS) @ tables.dtt2e_matrix(s) for s in (False, True)]
         self._lags_cos, self._lags_sin = (self._array(m) for m in lags)
         self._freqs_cos, self._freqs_sin = (self._array(m.T) for m in lags)
+        texture_view = self._allocate_texture() if self.textures else None
         # Torch views of the outputs (zero-copy; made once).
         self._result = TileResult(
             clt=wp.to_torch(self._clt).view(tiles, cams, colours, 4, 8, 8),
@@ -151,12 +163,33 @@ class TileProcessor:
             layers=None if self._layers is None else wp.to_torch(self._layers),
             valid=wp.to_torch(self._valid),
             centres=wp.to_torch(self._centres),
+            texture=texture_view,
         )
         self._frames_t = wp.to_torch(self._frames)
         self._disparity_t = wp.to_torch(self._disparity)
         self._centres_t = self._result.centres
         self._active_t = wp.to_torch(self._active)
         self._active_in = self._all_active
+
+    def _allocate_texture(self) -> torch.Tensor:
+        """Texture buffers and tables; returns the image view ``(channels, H, W)`` of the canvas."""
+        d, cams, colours = self.device, self.cams, self.colours
+        n = self.tiles * cams * colours
+        self._tex_pix = wp.zeros((n, 16, 16), dtype=wp.float32, device=d)
+        self._tex_cmp = wp.zeros((n, 16, 16), dtype=wp.float32, device=d)
+        self._tex_weights = wp.zeros((self.tiles * cams, 16, 16), dtype=wp.float32, device=d)
+        self._canvas = wp.zeros((colours + 1, self.height + 8, self.width + 8), dtype=wp.float32, device=d)
+        tc = self.texture_config
+        self._tex_lpf = self._array(np.stack([tables.lpf(s) for s in tc.lpf_sigmas]))
+        win = 0.5 * tables.half_sine(np.arange(16))
+        inverse = [win[:, None] * (tables.fold_matrix(s).T @ tables.dtt4_matrix(s)) for s in (False, True)]
+        self._inv_cos, self._inv_sin = (self._array(g) for g in inverse)
+        self._inv_cos_t, self._inv_sin_t = (self._array(g.T) for g in inverse)
+        self._tex_weights_c = self._array(np.array(tc.colour_weights, dtype=np.float32))
+        # Output channels in R, G, B order (internal colour order is R, B, G).
+        self._channel_of_colour = self._array(np.array([0, 2, 1] if colours == 3 else [0], dtype=np.int32), wp.int32)
+        self._canvas_t = wp.to_torch(self._canvas)
+        return self._canvas_t[:, 4 : 4 + self.height, 4 : 4 + self.width]
 
     def _colour_masks(self) -> np.ndarray:
         """(4 * colours, 16, 16) colour masks per window-corner parity [py, px, colour]; G carries its 0.5."""
@@ -271,6 +304,8 @@ class TileProcessor:
         self.prepare(frames_in, target_disparity, centres=centres, active=active)
         self.convert()
         self.correlate()
+        if self.textures:
+            self.texture()
         return self._result
 
     # --- stages (public so benchmarks can time them; ``process`` runs them in order) ----------------------------
@@ -336,3 +371,37 @@ class TileProcessor:
                     outputs=[self._layers],
                     device=self.device,
                 )
+
+    def texture(self) -> None:
+        """Stage 3: CLT tiles -> RGBA texture image (needs ``textures=True`` at construction)."""
+        if not self.textures:
+            raise RuntimeError("texture: this processor was built without textures=True")
+        tc, d = self.texture_config, self.device
+        per_pixel = (self.tiles * self.cams * self.colours, 16, 16)
+        with _CPU_LAUNCH_LOCK:
+            self._canvas.zero_()
+            wp.launch_tiled(
+                texture.texture_imclt,
+                dim=[self.tiles],
+                inputs=[self._clt, self._finite, self.cams, self.colours, self._tex_lpf, self._inv_cos,
+                        self._inv_sin, self._inv_cos_t, self._inv_sin_t],
+                outputs=[self._tex_pix],
+                block_dim=self.block_dim,
+                device=d,
+            )
+            wp.launch(
+                texture.texture_demosaic,
+                dim=per_pixel,
+                inputs=[self._tex_pix, self._finite, self.cams, self.colours, tc.scale_shot, tc.min_shot],
+                outputs=[self._tex_cmp],
+                device=d,
+            )
+            wp.launch(
+                texture.texture_combine,
+                dim=(self.tiles, 16, 16),
+                inputs=[self._tex_pix, self._tex_cmp, self._finite, self.tiles_x, self.tiles_y, self.cams,
+                        self.colours, self._offsets, self._tex_weights_c, self._channel_of_colour, tc.diff_sigma,
+                        tables.TEXTURE_WEIGHT_FLOOR, tc.dust_remove, tc.output_gain],
+                outputs=[self._tex_weights, self._canvas],
+                device=d,
+            )

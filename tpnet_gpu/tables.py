@@ -43,6 +43,17 @@ CORR_SIGMA = 0.9  # LPF applied after normalisation (colour)
 CORR_SIGMA_MONO = 0.15
 NET_CORR_OFFSET = 0.1  # corr_offset of the pair combination for the network layers (network.md §1)
 
+# Texture defaults (tile_processor.md §7.3, §9): per-colour low-pass sigmas (R, B, G; mono), colour weights of
+# the cameras' comparison (corr_red 0.5, corr_blue 0.2, normalised), difference sigma, shot-noise compression.
+TEXTURE_SIGMAS = (0.9, 0.9, 0.6)
+TEXTURE_SIGMA_MONO = 0.4
+TEXTURE_COLOUR_WEIGHTS = (0.5 / 1.7, 0.2 / 1.7, 1.0 / 1.7)
+TEXTURE_DIFF_SIGMA = 5.0
+TEXTURE_MIN_SHOT = 10.0
+TEXTURE_SCALE_SHOT = 3.0
+TEXTURE_WEIGHT_FLOOR = 1e-4  # FAT_ZERO_WEIGHT: keeps every camera's weight positive
+TEXTURE_OUTPUT_GAIN = 4.0  # a zero-filled colour reconstructs to ~1/4 of its value (§5.4)
+
 # Bayer: green is prescaled so every colour has density weight 1/4 (tile_processor.md §1.1).
 GREEN_PRESCALE = 0.5
 

@@ -25,7 +25,7 @@ def reference_clt(frames, centres, cfa, kernels=None):
             kx = np.clip(np.floor(c[:, 0] / 16).astype(int) + 1, 0, cols - 1)
             ky = np.clip(np.floor(c[:, 1] / 16).astype(int) + 1, 0, rows - 1)
             k = kernels[cam][ky, kx]
-        out.append(ref.convert_tiles(planes, centres[:, cam], kernels=k)[0])
+        out.append(ref.convert_tiles(planes, np.nan_to_num(centres[:, cam]), kernels=k)[0])
     return np.stack(out, axis=1)
 
 

@@ -1,0 +1,233 @@
+"""Texture: shift-corrected CLT tiles -> RGBA image with alpha from the cameras' agreement (tile_processor.md
+§7.3, §7.4).
+
+Three launches: ``texture_imclt`` (one block per tile: low-pass and inverse MCLT of every camera and colour as
+two matrix products per quadrant), ``texture_demosaic`` (per pixel: 3x3 filter of the zero-filled colours and
+shot-noise compression), ``texture_combine`` (per pixel: camera weights, colour, alpha, the alpha fade at the
+edge of the processed region, and an atomic overlap-add into the image canvas).
+
+Layouts: ``clt`` (tiles * cams * colours * 4, 8, 8); ``pix``/``cmp`` (tiles * cams * colours, 16, 16) = the
+IMCLT tiles T and the compared values M / W2 (kept unwindowed: dividing a windowed value by the tiny corner
+window again would cost float32 precision); ``weights`` (tiles * cams, 16, 16); ``canvas`` (channels, H + 8,
+W + 8), image pixel u at canvas u + 4.
+"""
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.kernel
+def texture_imclt(
+    clt: wp.array3d(dtype=wp.float32),
+    finite: wp.array(dtype=wp.bool),
+    cams: int,
+    colours: int,
+    lpf: wp.array3d(dtype=wp.float32),
+    inv_cos: wp.array2d(dtype=wp.float32),
+    inv_sin: wp.array2d(dtype=wp.float32),
+    inv_cos_t: wp.array2d(dtype=wp.float32),
+    inv_sin_t: wp.array2d(dtype=wp.float32),
+    pix: wp.array3d(dtype=wp.float32),
+):
+    """One block per tile. lpf: (colours, 8, 8); inv_*: (16, 8) per-axis inverse operators (window/2 x unfold x
+    DTT-IV) and inv_*_t their (8, 16) transposes; pix out: T = sum_q G_{q>>1} (L X_q) G_{q&1}^T."""
+    tile = wp.tid()
+    if not finite[tile]:
+        return
+    g_c = wp.tile_load(inv_cos, shape=(16, 8))
+    g_s = wp.tile_load(inv_sin, shape=(16, 8))
+    gt_c = wp.tile_load(inv_cos_t, shape=(8, 16))
+    gt_s = wp.tile_load(inv_sin_t, shape=(8, 16))
+    for cam in range(cams):
+        for colour in range(colours):
+            low = wp.tile_load(lpf[colour], shape=(8, 8))
+            base = ((tile * cams + cam) * colours + colour) * 4
+            x0 = wp.tile_map(wp.mul, wp.tile_load(clt[base + 0], shape=(8, 8)), low)
+            x1 = wp.tile_map(wp.mul, wp.tile_load(clt[base + 1], shape=(8, 8)), low)
+            x2 = wp.tile_map(wp.mul, wp.tile_load(clt[base + 2], shape=(8, 8)), low)
+            x3 = wp.tile_map(wp.mul, wp.tile_load(clt[base + 3], shape=(8, 8)), low)
+            out = wp.tile_zeros(shape=(16, 16), dtype=wp.float32)
+            wp.tile_matmul(g_c, wp.tile_matmul(x0, gt_c), out)  # CC: vertical cos, horizontal cos
+            wp.tile_matmul(g_c, wp.tile_matmul(x1, gt_s), out)  # SC
+            wp.tile_matmul(g_s, wp.tile_matmul(x2, gt_c), out)  # CS
+            wp.tile_matmul(g_s, wp.tile_matmul(x3, gt_s), out)  # SS
+            wp.tile_store(pix[(tile * cams + cam) * colours + colour], out)
+
+
+@wp.func
+def window_sq(r: int, c: int) -> float:
+    """w(r)^2 w(c)^2 with w(n) = sin(pi (2n + 1) / 32)."""
+    wr = wp.sin(wp.pi * (2.0 * float(r) + 1.0) / 32.0)
+    wc = wp.sin(wp.pi * (2.0 * float(c) + 1.0) / 32.0)
+    return wr * wr * wc * wc
+
+
+@wp.kernel
+def texture_demosaic(
+    pix: wp.array3d(dtype=wp.float32),
+    finite: wp.array(dtype=wp.bool),
+    cams: int,
+    colours: int,
+    scale_shot: float,
+    min_shot: float,
+    cmp: wp.array3d(dtype=wp.float32),
+):
+    """Per pixel of every (tile, camera, colour): M / W2 = compress(filter3x3(T / W2)) on the 14x14 interior
+    (R, B: [1 2 1; 2 4 2; 1 2 1] / 16; G: [0 1 0; 1 4 1; 0 1 0] / 8), border unfiltered; mono: T / W2."""
+    i, r, c = wp.tid()
+    if not finite[i // (cams * colours)]:
+        return
+    v = pix[i, r, c] / window_sq(r, c)
+    if colours == 1:
+        cmp[i, r, c] = v
+        return
+    if r > 0 and r < 15 and c > 0 and c < 15:
+        acc = float(0.0)
+        green = (i % colours) == 2
+        for dy in range(-1, 2):
+            for dx in range(-1, 2):
+                u = pix[i, r + dy, c + dx] / window_sq(r + dy, c + dx)
+                if green:
+                    wgt = 0.0
+                    if dy == 0 and dx == 0:
+                        wgt = 0.5
+                    elif dy == 0 or dx == 0:
+                        wgt = 0.125
+                    acc += wgt * u
+                else:
+                    acc += float((2 - wp.abs(dy)) * (2 - wp.abs(dx))) / 16.0 * u
+        v = acc
+    if v > min_shot:
+        v = scale_shot * wp.sqrt(v)
+    else:
+        v = scale_shot * v / wp.sqrt(min_shot)
+    cmp[i, r, c] = v
+
+
+@wp.func
+def fade_ramp(i: int) -> float:
+    return 0.5 * (1.0 - wp.cos(wp.pi * (float(i) + 0.5) / 16.0))
+
+
+@wp.func
+def alpha_fade(north: bool, east: bool, south: bool, west: bool, r: int, c: int) -> float:
+    """§7.4: one contributing neighbour -> ramp towards it; two adjacent -> max of both; else 1."""
+    count = int(north) + int(east) + int(south) + int(west)
+    if count == 1:
+        if north:
+            return fade_ramp(15 - r)
+        if east:
+            return fade_ramp(c)
+        if south:
+            return fade_ramp(r)
+        return fade_ramp(15 - c)
+    if count == 2 and north != south:
+        vertical = fade_ramp(r)
+        if north:
+            vertical = fade_ramp(15 - r)
+        horizontal = fade_ramp(15 - c)
+        if east:
+            horizontal = fade_ramp(c)
+        return wp.max(vertical, horizontal)
+    return 1.0
+
+
+@wp.kernel
+def texture_combine(
+    pix: wp.array3d(dtype=wp.float32),
+    cmp: wp.array3d(dtype=wp.float32),
+    finite: wp.array(dtype=wp.bool),
+    tiles_x: int,
+    tiles_y: int,
+    cams: int,
+    colours: int,
+    offsets: wp.array(dtype=wp.vec2f),
+    colour_weights: wp.array(dtype=wp.float32),
+    channel_of_colour: wp.array(dtype=wp.int32),
+    diff_sigma: float,
+    weight_floor: float,
+    dust_remove: bool,
+    output_gain: float,
+    weights: wp.array3d(dtype=wp.float32),
+    canvas: wp.array3d(dtype=wp.float32),
+):
+    """Per pixel (tile, r, c) of contributing tiles: weights (§7.3 a-d), colour = weighted mean of T, alpha =
+    W2 x mean weight, times the alpha fade, atomically added to the canvas (colours x output_gain)."""
+    tile, r, c = wp.tid()
+    if not finite[tile]:
+        return
+    w2 = window_sq(r, c)
+    xi = 1.0 / (2.0 * diff_sigma * diff_sigma)
+    base = tile * cams
+    # a. pairwise agreement
+    for cam in range(cams):
+        weights[base + cam, r, c] = 0.0
+    for a in range(cams):
+        for b in range(a + 1, cams):
+            d = float(0.0)
+            for k in range(colours):
+                diff = cmp[(base + a) * colours + k, r, c] - cmp[(base + b) * colours + k, r, c]
+                d += colour_weights[k] * diff * diff
+            v = wp.exp(-xi * d / wp.length_sq(offsets[b] - offsets[a])) + weight_floor
+            weights[base + a, r, c] = weights[base + a, r, c] + v
+            weights[base + b, r, c] = weights[base + b, r, c] + v
+    # b. the two best cameras (first index wins ties)
+    best = int(0)
+    for cam in range(1, cams):
+        if weights[base + cam, r, c] > weights[base + best, r, c]:
+            best = cam
+    second = int(-1)
+    for cam in range(cams):
+        if cam != best:
+            if second < 0:
+                second = cam
+            elif weights[base + cam, r, c] > weights[base + second, r, c]:
+                second = cam
+    wb = weights[base + best, r, c]
+    ws = weights[base + second, r, c]
+    # c. agreement of every camera with the two best cameras' mean
+    total = float(0.0)
+    for cam in range(cams):
+        d = float(0.0)
+        for k in range(colours):
+            mean = (wb * cmp[(base + best) * colours + k, r, c] + ws * cmp[(base + second) * colours + k, r, c]) / (wb + ws)
+            diff = cmp[(base + cam) * colours + k, r, c] - mean
+            d += colour_weights[k] * diff * diff
+        weights[base + cam, r, c] = wp.exp(-xi * d) + weight_floor
+        total += weights[base + cam, r, c]
+    # d. dust removal
+    if dust_remove:
+        worst = int(0)
+        for cam in range(1, cams):
+            if weights[base + cam, r, c] < weights[base + worst, r, c]:
+                worst = cam
+        w_worst = weights[base + worst, r, c]
+        others = float(cams - 1)
+        mu = (total - w_worst) / others
+        total = float(0.0)
+        for cam in range(cams):
+            w = weights[base + cam, r, c]
+            if cam == worst:
+                w = w_worst * w_worst / mu
+            else:
+                w = w * (1.0 + w_worst * (mu - w_worst) / (others * mu * mu))
+            weights[base + cam, r, c] = w
+            total += w
+    # e. colour and alpha, faded at the edge of the contributing region, overlap-added
+    ty = tile // tiles_x
+    tx = tile - ty * tiles_x
+    # Positions outside the frame count as contributing: only the region's edges inside the frame fade.
+    north = ty == 0 or finite[tile - tiles_x]
+    south = ty + 1 == tiles_y or finite[tile + tiles_x]
+    west = tx == 0 or finite[tile - 1]
+    east = tx + 1 == tiles_x or finite[tile + 1]
+    fade = alpha_fade(north, east, south, west, r, c)
+    y = 8 * ty + r
+    x = 8 * tx + c
+    for k in range(colours):
+        acc = float(0.0)
+        for cam in range(cams):
+            acc += weights[base + cam, r, c] * pix[(base + cam) * colours + k, r, c]
+        wp.atomic_add(canvas, channel_of_colour[k], y, x, output_gain * fade * acc / total)
+    wp.atomic_add(canvas, colours, y, x, fade * w2 * total / float(cams))
