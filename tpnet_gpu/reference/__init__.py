@@ -21,7 +21,8 @@ from tpnet_gpu.reference.mclt import (
     split_centre,
     tile_centres,
 )
-from tpnet_gpu.reference.products import bconj, bmul, correlation_product, kernel_to_clt
+from tpnet_gpu.reference.products import bconj, bmul, correlation_product
+from tpnet_gpu.tables import kernel_to_clt  # a table construction shared with the fast path
 from tpnet_gpu.reference.transforms import dct2e, dct4, dst2e, dst4, dtt4
 
 __all__ = [

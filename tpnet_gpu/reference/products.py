@@ -46,19 +46,3 @@ def bconj(a) -> np.ndarray:
 def correlation_product(first, second) -> np.ndarray:
     """``conj(first) * second`` per frequency (§6.2): the spectrum of sum_x f1(x) f2(x + s), ``[..., 4, 8, 8]``."""
     return bmul(bconj(first), second)
-
-
-def kernel_to_clt(h) -> np.ndarray:
-    """CLT form ``[4, 8, 8]`` of a pixel-domain convolution kernel h, ``(2r+1, 2r+1)`` with r <= 7 (§5.3).
-
-    ``h[dy + r, dx + r]`` is the weight in out(y, x) = sum h(dy, dx) in(y - dy, x - dx), so a delta at dx = +1
-    moves content one pixel right. K_q[ky, kx] = sum h(dy, dx) phi_{q>>1}(omega_ky dy) phi_{q&1}(omega_kx dx),
-    phi_0 = cos, phi_1 = sin. The identity kernel gives K_CC = 1, the rest 0.
-    """
-    h = np.asarray(h, dtype=np.float64)
-    if h.ndim != 2 or h.shape[0] != h.shape[1] or h.shape[0] % 2 != 1 or h.shape[0] > 2 * tables.CORR_RADIUS + 1:
-        raise ValueError(f"h: expected a square kernel of odd side <= 15, got shape {h.shape}")
-    r = h.shape[0] // 2
-    arg = np.outer(tables.omega(), np.arange(-r, r + 1))  # [k, d]
-    phi = (np.cos(arg), np.sin(arg))
-    return np.stack([phi[q >> 1] @ h @ phi[q & 1].T for q in range(4)])
