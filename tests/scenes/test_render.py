@@ -1,0 +1,90 @@
+"""Scene renderer (tpnet_gpu/scenes/render.py). Oracles: the disparity the plane was placed at (geometry
+E: d = f B / (Z p)), the tile processor's own correlation peak on the rendered raws, and determinism."""
+
+import numpy as np
+import pytest
+
+from tests.reference.peaks import centroid_peak
+from tpnet_gpu import tables
+from tpnet_gpu.camera import Rig
+from tpnet_gpu.config import CorrelationConfig
+from tpnet_gpu.processor import TileProcessor
+from tpnet_gpu.scenes import Optics, Scene, Sensor, Sky, plane, render
+from tpnet_gpu.scenes import textures as tx
+
+RIG = Rig(width=128, height=96)
+
+
+def _plane_scene(d, seed=0):
+    rng = np.random.default_rng(seed)
+    return Scene([plane(RIG, float(RIG.distance(d)), tx.noise_texture(rng, 512, contrast=0.4))], Sky())
+
+
+def test_plane_ground_truth_is_exact():
+    d = 2.3
+    out = render(_plane_scene(d), RIG, supersample=1, noise=False)
+    np.testing.assert_allclose(out.tile_disparity, d, rtol=1e-7)  # float32 storage
+    np.testing.assert_allclose(out.disparity, d, rtol=1e-6)
+    assert np.all(out.tile_spread < 1e-5) and out.tile_confidence.min() > 0.5
+
+
+@pytest.mark.parametrize("noise", [False, True])
+def test_rendered_plane_correlates_at_its_disparity(noise):
+    """Correlating the rendered raws at target 0, every pair peaks at -d along its axis (geometry B.2);
+    refining converges to d within 0.05 px (median of the interior tiles), with realistic optics and noise."""
+    d = 2.3
+    out = render(_plane_scene(d), RIG, optics=Optics(), sensor=Sensor(), noise=noise, seed=3)
+    frames = out.raws.astype(np.float32) - out.sensor.black_level
+    tp = TileProcessor(RIG.height, RIG.width, config=CorrelationConfig(fat_zero=0.0), device="cpu")
+    offsets = np.array(tables.QUAD_OFFSETS)
+    axes = np.array([offsets[b] - offsets[a] for a, b in tables.QUAD_PAIRS])
+    target = np.zeros((RIG.height // 8, RIG.width // 8), dtype=np.float32)
+    for _ in range(5):
+        corr = tp.process(frames, target).corr.numpy().reshape(*target.shape, 6, 15, 15)
+        residual = np.zeros_like(target)
+        for ty in range(1, target.shape[0] - 1):
+            for tx_ in range(1, target.shape[1] - 1):
+                peaks = np.array([centroid_peak(c) for c in corr[ty, tx_]])
+                residual[ty, tx_] = np.mean(-(peaks * axes).sum(1) / (axes * axes).sum(1))
+        target += residual
+    assert np.median(np.abs(target[1:-1, 1:-1] - d)) <= 0.05
+
+
+def test_rendering_is_deterministic_for_a_seed():
+    scene = _plane_scene(1.0)
+    a = render(scene, RIG, seed=5).raws
+    b = render(scene, RIG, seed=5).raws
+    c = render(scene, RIG, seed=6).raws
+    np.testing.assert_array_equal(a, b)
+    assert np.any(a != c)
+
+
+def test_sky_and_depth_edges_have_low_confidence():
+    rng = np.random.default_rng(1)
+    fore = plane(RIG, 20.0, tx.edges_texture(rng, 256), centre_px=(64, 48), size_px=(40, 40))
+    back = plane(RIG, 400.0, tx.noise_texture(rng, 256, contrast=0.4), centre_px=(64, 80), size_px=(400, 40))
+    out = render(Scene([fore, back], Sky()), RIG, supersample=1, noise=False)
+    sky = out.tile_disparity == 0
+    assert sky.any() and out.tile_confidence[sky].max() < 0.5  # near-uniform sky: no texture
+    edge = out.tile_spread > 1.0  # windows mixing the 20 m board and the far plane or sky
+    assert edge.any() and out.tile_confidence[edge].max() <= 0.1
+    assert out.tile_disparity.max() == pytest.approx(RIG.disparity(20.0), rel=1e-6)
+
+
+def test_raws_follow_the_sensor_model():
+    sensor = Sensor(bits=10, black_level=32)
+    out = render(_plane_scene(1.0), RIG, sensor=sensor, supersample=1)
+    assert out.raws.dtype == np.uint16 and out.raws.max() <= 1023 and out.raws.min() >= 0
+    assert abs(np.median(out.raws) - 32 - 0.4 * 0.7 * (1023 - 32)) < 80  # texture mean 0.4, exposure 0.7
+
+
+def test_textures_and_bad_input():
+    rng = np.random.default_rng(2)
+    for texture in (tx.noise_texture(rng, 64), tx.edges_texture(rng, 64), tx.lines_texture(rng, 64),
+                    tx.photo_texture("coffee")):
+        assert texture.ndim == 3 and texture.shape[2] == 3 and texture.dtype == np.float32
+        assert 0.0 <= texture.min() and texture.max() <= 1.0
+    with pytest.raises(ValueError, match="name: expected one of .* got 'lena'"):
+        tx.photo_texture("lena")
+    with pytest.raises(ValueError, match="rig: expected a sensor size in multiples of 8, got 100x96"):
+        render(Scene(), Rig(width=100, height=96))

@@ -1,0 +1,7 @@
+"""Synthetic quad-camera scenes with exact ground truth: textures, objects, the renderer, built-in scenes."""
+
+from tpnet_gpu.scenes.library import demo_scene, random_scene
+from tpnet_gpu.scenes.objects import Patch, Scene, Sky, plane
+from tpnet_gpu.scenes.render import Optics, Rendered, Sensor, render
+
+__all__ = ["Optics", "Patch", "Rendered", "Scene", "Sensor", "Sky", "demo_scene", "plane", "random_scene", "render"]
