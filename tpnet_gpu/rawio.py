@@ -69,7 +69,7 @@ class RawFrame:
 
 
 @dataclass(frozen=True, eq=False)
-class Scene:
+class SceneFolder:
     """A scene folder read back: ``frames`` (one per camera), ``ground_truth`` arrays, ``camera`` dict."""
 
     frames: list[RawFrame]
@@ -356,7 +356,7 @@ def write_scene(folder, raws, cfa: str, *, black_level=0, white_level=None, grou
     return folder
 
 
-def read_scene(folder) -> Scene:
+def read_scene(folder) -> SceneFolder:
     """Read a scene folder written by ``write_scene``; frames are checked to match and to carry the JSON's CFA.
 
     Raises:
@@ -390,4 +390,4 @@ def read_scene(folder) -> Scene:
         raise RawFormatError(f"{meta_path}: cfa {meta['cfa']!r} differs from the cameras' {frames[0].cfa!r}")
     with np.load(folder / meta["ground_truth"], allow_pickle=False) as npz:
         ground_truth = {k: npz[k] for k in npz.files}
-    return Scene(frames, ground_truth, meta["camera"], folder)
+    return SceneFolder(frames, ground_truth, meta["camera"], folder)
