@@ -1,9 +1,11 @@
-"""The ``tpnet`` command line. Subcommands are filled in by later stages; each has ``--help``."""
+"""The ``tpnet`` command line. Each subcommand has ``--help``; bad input ends with a one-line message, not a
+traceback (exit status 2)."""
 
 from __future__ import annotations
 
 import argparse
 import sys
+import time
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -13,18 +15,54 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_render(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from tpnet_gpu.camera import Rig
+    from tpnet_gpu.scenes import Optics, Sensor, demo_scene, random_scene, render
+    from tpnet_gpu.scenes.folder import save
+
+    rig = Rig(width=args.width, height=args.height)
+    scene = demo_scene(rig, seed=args.seed) if args.scene == "demo" else random_scene(rig, np.random.default_rng(args.seed))
+    optics = Optics()
+    sensor = Sensor(bits=args.bits)
+    start = time.perf_counter()
+    rendered = render(scene, rig, optics=optics, sensor=sensor, supersample=args.supersample, seed=args.seed,
+                      noise=not args.no_noise, progress=lambda m: print(f"rendering {m}", file=sys.stderr))
+    seconds = time.perf_counter() - start
+    folder = save(rendered, args.out, name=f"{args.scene}-{args.seed}", optics=optics)
+    print(f"rendered {args.scene} scene (seed {args.seed}), {rig.cams} cameras of {rig.width}x{rig.height}, "
+          f"supersample {args.supersample}, in {seconds:.1f} s -> {folder}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tpnet", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="run the tile processor on a built-in generated scene and report")
     demo.add_argument("--seed", type=int, default=0, help="seed of the generated texture")
     demo.set_defaults(func=_cmd_demo)
+
+    rend = sub.add_parser("render", help="render a synthetic quad-camera scene folder (DNGs + ground truth)")
+    rend.add_argument("out", help="output folder")
+    rend.add_argument("--scene", choices=("demo", "random"), default="demo", help="built-in scene kind")
+    rend.add_argument("--seed", type=int, default=0, help="seed of the scene and the sensor noise")
+    rend.add_argument("--width", type=int, default=2592, help="sensor width, pixels (multiple of 8)")
+    rend.add_argument("--height", type=int, default=1936, help="sensor height, pixels (multiple of 8)")
+    rend.add_argument("--supersample", type=int, default=2, help="sub-pixel rays per axis")
+    rend.add_argument("--bits", type=int, default=12, choices=(10, 12, 14, 16), help="sensor bit depth")
+    rend.add_argument("--no-noise", action="store_true", help="no photon or read noise")
+    rend.set_defaults(func=_cmd_render)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return args.func(args)
+    try:
+        return args.func(args)
+    except (ValueError, TypeError, FileNotFoundError, OSError) as exc:
+        print(f"tpnet {args.command}: error: {exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":
