@@ -26,16 +26,16 @@ def demo_scene(rig: Rig = Rig(), seed: int = 0) -> Scene:
     objects = [
         plane(rig, 1500.0, tx.photo_texture("grass"), centre_px=_at(rig, 0.5, 0.75), size_px=_size(rig, 4, 0.75),
               name="far wall"),
-        plane(rig, 120.0, noise, centre_px=_at(rig, 0.22, 0.62), size_px=_size(rig, 0.36, 0.5), tilt_deg=0,
-              pan_deg=70, name="slanted plane"),
+        plane(rig, 120.0, noise, centre_px=_at(rig, 0.2, 0.62), size_px=_size(rig, 0.3, 0.45), tilt_deg=10,
+              pan_deg=45, name="slanted plane"),
         plane(rig, 300.0, tx.lines_texture(rng, 1024), centre_px=_at(rig, 0.78, 0.35), size_px=_size(rig, 0.3, 0.3),
               name="line pattern"),
         plane(rig, 40.0, tx.photo_texture("astronaut"), centre_px=_at(rig, 0.62, 0.62), size_px=_size(rig, 0.22, 0.3),
-              name="photo board"),
+              fit_texture=True, name="photo board"),
         plane(rig, 18.0, tx.edges_texture(rng, 1024), centre_px=_at(rig, 0.4, 0.82), size_px=_size(rig, 0.16, 0.2),
               name="near box"),
         plane(rig, 12.0, tx.photo_texture("coffee"), centre_px=_at(rig, 0.86, 0.8), size_px=_size(rig, 0.12, 0.16),
-              elliptic=True, name="near disc"),
+              elliptic=True, fit_texture=True, name="near disc"),
     ]
     return Scene(objects, Sky(texture=tx.noise_texture(rng, 256, beta=2.0)), name=f"demo-{seed}")
 
@@ -71,6 +71,7 @@ def random_scene(rig: Rig, rng: np.random.Generator, *, objects: int | None = No
             centre_px=_at(rig, rng.uniform(0.05, 0.95), rng.uniform(0.1, 0.95)),
             size_px=_size(rig, rng.uniform(0.08, 0.5), rng.uniform(0.08, 0.5)),
             tilt_deg=rng.uniform(-60, 60) if slanted else 0.0, pan_deg=rng.uniform(-70, 70) if slanted else 0.0,
-            elliptic=bool(rng.random() < 0.25), gain=rng.uniform(0.5, 1.3), name=f"object {i}",
+            elliptic=bool(rng.random() < 0.25), gain=rng.uniform(0.5, 1.3), fit_texture=bool(rng.random() < 0.3),
+            name=f"object {i}",
         ))
     return Scene(items, Sky(texture=tx.noise_texture(rng, 256, beta=2.0)), name="random")

@@ -53,8 +53,10 @@ class Patch:
         return np.where(ok, t, np.inf), u, v
 
     def colour(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Reflectance ``(N, 3)`` at plane coordinates (mm); texture rows run against v (image-like)."""
-        return self.gain * sample(self.texture, u / self.texel_mm, -v / self.texel_mm)
+        """Reflectance ``(N, 3)`` at plane coordinates (mm); texture rows run against v (image-like) and the
+        texture's centre sits at the patch origin."""
+        half = self.texture.shape[0] / 2.0
+        return self.gain * sample(self.texture, u / self.texel_mm + half, -v / self.texel_mm + half)
 
 
 @dataclass
@@ -119,11 +121,14 @@ def _texel_for(rig: Rig, distance_m: float, oversample: float = 1.5) -> float:
 
 
 def plane(rig: Rig, distance_m: float, texture: np.ndarray, *, centre_px=None, size_px=None, elliptic=False,
-          tilt_deg: float = 0.0, pan_deg: float = 0.0, gain: float = 1.0, name: str = "plane") -> Patch:
+          tilt_deg: float = 0.0, pan_deg: float = 0.0, gain: float = 1.0, fit_texture: bool = False,
+          name: str = "plane") -> Patch:
     """A patch whose centre is seen at virtual pixel ``centre_px`` (default: image centre) at ``distance_m``.
 
     ``size_px`` (w, h) bounds it to about that many pixels on the image (None: unbounded); ``tilt_deg``
     rotates it about the horizontal axis (top away from the viewer), ``pan_deg`` about the vertical one.
+    ``fit_texture`` stretches one copy of the texture over the (bounded) patch, e.g. a photograph; otherwise
+    the texture tiles with texels 1.5x finer than a pixel's footprint.
     """
     centre_px = rig.centre if centre_px is None else np.asarray(centre_px, dtype=np.float64)
     origin = rig.image_to_world(centre_px, rig.disparity(distance_m))
@@ -134,4 +139,7 @@ def plane(rig: Rig, distance_m: float, texture: np.ndarray, *, centre_px=None, s
     v_axis /= np.linalg.norm(v_axis)
     footprint = distance_m * 1000.0 * rig.pixel_size_mm / rig.focal_mm  # mm per pixel
     half = (np.inf, np.inf) if size_px is None else (size_px[0] / 2 * footprint, size_px[1] / 2 * footprint)
-    return Patch(origin, u_axis, v_axis, texture, _texel_for(rig, distance_m), half, elliptic, gain, name)
+    texel = _texel_for(rig, distance_m)
+    if fit_texture and size_px is not None:
+        texel = 2.0 * max(half) / texture.shape[0]
+    return Patch(origin, u_axis, v_axis, texture, texel, half, elliptic, gain, name)
