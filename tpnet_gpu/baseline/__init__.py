@@ -1,0 +1,1 @@
+"""Hand-crafted disparity baseline (geometry_and_lma.md B, C)."""
