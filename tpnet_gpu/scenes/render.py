@@ -37,6 +37,14 @@ class Optics:
     def sigma(self, radius_fraction):
         return self.sigma_centre + (self.sigma_edge - self.sigma_centre) * np.asarray(radius_fraction) ** 2
 
+    def psfs(self, rig: Rig) -> np.ndarray:
+        """The same lens as PSFs on the aberration-kernel grid, ``(cams, rows, cols, 3, s, s)`` (R, B, G), for
+        ``tpnet_gpu.aberration.deconvolution_kernels``."""
+        from tpnet_gpu.aberration import field_psfs  # noqa: PLC0415
+
+        return field_psfs(rig.height, rig.width, rig.cams, sigma_centre=self.sigma_centre,
+                          sigma_edge=self.sigma_edge, lateral_ca=self.lateral_ca)
+
 
 @dataclass(frozen=True)
 class Sensor:
