@@ -1,0 +1,266 @@
+"""Tile-processor speed benchmark: the Warp stages of ``TileProcessor`` against the vectorised NumPy peer.
+
+    python bench/bench_tp.py [--device cpu|cuda] [--height 1936 --width 2592] [--repeat 3] [--json out/bench_tp.json]
+
+One quad frame (4 cameras, random 12-bit raw values, seeded), every tile at one target disparity. The processor is
+built once; ``prepare`` (input mapping, padding, tile centres) runs once and is not part of the stage timings.
+Each stage is timed on its own, the Warp stages with a device synchronisation before the timer stops. The first
+pass of each implementation is a warm-up (Warp: kernel compilation; NumPy: first touch of its buffers), then
+``--repeat`` passes give median and best. The NumPy peer (bench/numpy_tp.py) gets the processor's own tile
+centres and correlation parameters, and the two results are compared (max |numpy - warp| / max |warp|).
+
+Prints a table (stage | warp ms | numpy ms | ratio numpy/warp) and writes the numbers with machine information to
+JSON. Progress goes to stderr. To add a stage, add one ``Stage`` entry to ``STAGES``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+import warp as wp
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from numpy_tp import numpy_convert, numpy_correlate  # noqa: E402
+
+from tpnet_gpu import tables  # noqa: E402
+from tpnet_gpu.processor import TileProcessor  # noqa: E402
+
+# Filippov & Dzhimiev, "See far with TPNET": the whole tile processor, one full quad frame, on a GTX 1050 Ti.
+PAPER_TP_MS = 87.0
+PAPER_GPU = "GTX 1050 Ti"
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One timed stage: ``warp(tp)`` launches it on the processor; ``numpy(state)`` runs the NumPy peer, reading
+    its inputs from and storing its output in the shared ``state`` dict (None: no NumPy peer yet)."""
+
+    name: str
+    warp: Callable[[TileProcessor], None]
+    numpy: Callable[[dict], None] | None
+
+
+def _numpy_convert(state: dict) -> None:
+    state["clt"] = None  # drop the previous output first: at full frame it is ~1 GB
+    state["clt"] = numpy_convert(state["frames"], state["centres"], state["cfa"])
+
+
+def _numpy_correlate(state: dict) -> None:
+    cfg = state["config"]
+    state["corr"] = None
+    state["corr"] = numpy_correlate(
+        state["clt"], state["pairs"], cfg.colour_weights, cfg.fat_zero, cfg.sigma_rb, cfg.sigma_corr
+    )
+
+
+STAGES = (
+    Stage("convert", lambda tp: tp.convert(), _numpy_convert),
+    Stage("correlate", lambda tp: tp.correlate(), _numpy_correlate),
+    Stage("texture", lambda tp: tp.texture(), None),  # no NumPy twin: the float64 reference is the oracle
+)
+
+
+def log(message: str) -> None:
+    print(f"[bench_tp] {message}", file=sys.stderr, flush=True)
+
+
+def cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def device_name(device) -> str:
+    return device.name if device.is_cuda else f"CPU ({cpu_model()})"
+
+
+def timed_ms(fn: Callable[[], None], sync: Callable[[], None] | None = None) -> float:
+    start = time.perf_counter()
+    fn()
+    if sync is not None:
+        sync()
+    return 1e3 * (time.perf_counter() - start)
+
+
+def summary(runs: list[float]) -> dict:
+    return {"median": statistics.median(runs), "best": min(runs), "runs": runs}
+
+
+def run_passes(label: str, stages, run_stage: Callable[[Stage], float], repeat: int) -> tuple[dict, dict]:
+    """One warm-up pass and ``repeat`` timed passes over ``stages``; returns (warm-up ms, run ms lists) by name."""
+    warmup = {}
+    for stage in stages:
+        log(f"{label} warm-up: {stage.name} ...")
+        warmup[stage.name] = run_stage(stage)
+        log(f"{label} warm-up: {stage.name} {warmup[stage.name]:.1f} ms")
+    runs = {stage.name: [] for stage in stages}
+    for r in range(repeat):
+        for stage in stages:
+            runs[stage.name].append(run_stage(stage))
+        log(f"{label} run {r + 1}/{repeat}: " + ", ".join(f"{s.name} {runs[s.name][-1]:.1f} ms" for s in stages))
+    return warmup, runs
+
+
+def max_relative_difference(got: np.ndarray, want: np.ndarray) -> float:
+    """max |got - want| / max |want|, one camera or pair (axis 1) at a time (no full-size temporaries)."""
+    diff = max(float(np.abs(got[:, i] - want[:, i]).max()) for i in range(want.shape[1]))
+    scale = max(float(want.max()), -float(want.min()))
+    return diff / scale if scale > 0 else diff
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--device", default=None, help="Warp device: cpu, cuda, cuda:N (default: cuda if present)")
+    parser.add_argument("--height", type=int, default=1936)
+    parser.add_argument("--width", type=int, default=2592)
+    parser.add_argument("--repeat", type=int, default=3, help="timed passes after the warm-up (default 3)")
+    parser.add_argument("--disparity", type=float, default=2.5, help="target disparity of every tile, px")
+    parser.add_argument("--cfa", default=tables.DEFAULT_CFA, help="Bayer pattern, or 'mono'")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", default="out/bench_tp.json", help="output JSON path ('' to skip)")
+    args = parser.parse_args(argv)
+    if args.repeat < 1:
+        parser.error("--repeat: expected at least 1")
+    cfa = None if args.cfa.lower() == "mono" else args.cfa
+
+    cams = len(tables.QUAD_OFFSETS)
+    rng = np.random.default_rng(args.seed)
+    frames = rng.integers(0, 4096, size=(cams, args.height, args.width), dtype=np.uint16).astype(np.float32)
+
+    # --- Warp -----------------------------------------------------------------------------------------------------
+    start = time.perf_counter()
+    tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, device=args.device)
+    setup_ms = 1e3 * (time.perf_counter() - start)
+    log(f"{tp.width}x{tp.height}, {cams} cameras, {tp.tiles} tiles, {len(tp.pairs)} pairs on {tp.device} "
+        f"({device_name(tp.device)}); processor built in {setup_ms:.0f} ms")
+    frames_t = torch.from_numpy(frames).to(tp.torch_device)  # float32, contiguous: read in place
+
+    def sync() -> None:
+        wp.synchronize_device(tp.device)
+
+    prepare_first_ms = timed_ms(lambda: tp.prepare(frames_t, args.disparity), sync)  # compiles its kernels
+    warp_warmup, warp_runs = run_passes("warp", STAGES, lambda s: timed_ms(lambda: s.warp(tp), sync), args.repeat)
+    log("warp: one process() call (prepare + all stages) for the centres and the comparison ...")
+    result = None
+
+    def process() -> None:
+        nonlocal result
+        result = tp.process(frames_t, args.disparity)
+
+    process_ms = timed_ms(process, sync)
+
+    # --- NumPy ----------------------------------------------------------------------------------------------------
+    numpy_stages = [s for s in STAGES if s.numpy is not None]
+    state = {
+        "frames": frames,
+        "centres": result.centres.cpu().numpy(),  # the processor's own per-camera tile centres
+        "cfa": cfa,
+        "pairs": tables.QUAD_PAIRS,
+        "config": tp.config,
+    }
+    numpy_warmup, numpy_runs = run_passes("numpy", numpy_stages, lambda s: timed_ms(lambda: s.numpy(state)),
+                                          args.repeat)
+
+    log("comparing results ...")
+    agreement = {
+        "clt_max_rel_diff": max_relative_difference(state["clt"], result.clt.cpu().numpy()),
+        "corr_max_rel_diff": max_relative_difference(state["corr"], result.corr.cpu().numpy()),
+    }
+
+    # --- report ---------------------------------------------------------------------------------------------------
+    stages = []
+    for s in STAGES:
+        warp_ms = summary(warp_runs[s.name])
+        numpy_ms = summary(numpy_runs[s.name]) if s.name in numpy_runs else None
+        ratio = numpy_ms["median"] / warp_ms["median"] if numpy_ms else None
+        stages.append({"name": s.name, "warp_ms": warp_ms, "numpy_ms": numpy_ms, "ratio_numpy_over_warp": ratio,
+                       "warmup_ms": {"warp": warp_warmup[s.name], "numpy": numpy_warmup.get(s.name)}})
+    both = [s.name for s in numpy_stages]
+    warp_total = summary([sum(r) for r in zip(*(warp_runs[n] for n in warp_runs))])
+    numpy_total = summary([sum(r) for r in zip(*(numpy_runs[n] for n in both))])
+    warp_total_same = summary([sum(r) for r in zip(*(warp_runs[n] for n in both))])
+    total = {"warp_ms": warp_total, "numpy_ms": numpy_total,
+             "ratio_numpy_over_warp": numpy_total["median"] / warp_total_same["median"], "ratio_over_stages": both}
+
+    report = {
+        "frame": {"width": tp.width, "height": tp.height, "cameras": cams, "tiles": tp.tiles,
+                  "pairs": len(tp.pairs), "cfa": cfa, "target_disparity": args.disparity, "seed": args.seed,
+                  "raw_values": "uniform integers 0..4095 as float32"},
+        "timing": {"repeat": args.repeat, "statistic": "median (best and all runs listed)",
+                   "warp_sync": "wp.synchronize_device before each timer stops",
+                   "excluded": "prepare (input mapping, padding, tile centres) and the warm-up pass",
+                   "warp_process_ms": "one whole process() call (prepare + all stages), after the timed runs"},
+        "stages": stages,
+        "total": total,
+        "warp_setup_ms": setup_ms,
+        "warp_first_prepare_ms": prepare_first_ms,
+        "warp_process_ms": process_ms,
+        "agreement": agreement,
+        "device": {"warp_device": str(tp.device), "name": device_name(tp.device), "is_cuda": tp.device.is_cuda},
+        "machine": {"platform": platform.platform(), "python": platform.python_version(),
+                    "cpu_count": os.cpu_count(), "cpu_model": cpu_model(), "numpy": np.__version__,
+                    "warp": wp.__version__, "torch": torch.__version__,
+                    "threads": "Warp CPU kernels run on one thread; NumPy's BLAS calls use all cores unless limited",
+                    "thread_env": {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}},
+        "paper": {"tp_ms": PAPER_TP_MS, "gpu": PAPER_GPU,
+                  "note": "whole tile processor, one full quad frame; comparable only with CUDA timings"},
+    }
+    print_table(report)
+    if args.json:
+        path = Path(args.json)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(report, indent=2) + "\n")
+        log(f"wrote {path}")
+    return report
+
+
+def print_table(report: dict) -> None:
+    f, t = report["frame"], report["timing"]
+
+    def ms(x):
+        return "-" if x is None else f"{x['median']:.1f}"
+
+    def ratio(x):
+        return "-" if x is None else f"{x:.2f}"
+
+    print(f"Tile processor, {f['width']}x{f['height']}, {f['cameras']} cameras ({f['cfa'] or 'mono'}), "
+          f"{f['tiles']} tiles, {f['pairs']} pairs")
+    print(f"device: {report['device']['warp_device']} = {report['device']['name']}; "
+          f"median of {t['repeat']} runs after a warm-up")
+    rows = [(s["name"], ms(s["warp_ms"]), ms(s["numpy_ms"]), ratio(s["ratio_numpy_over_warp"]))
+            for s in report["stages"]]
+    tot = report["total"]
+    rows.append(("total", ms(tot["warp_ms"]), ms(tot["numpy_ms"]), ratio(tot["ratio_numpy_over_warp"])))
+    header = ("stage", "warp ms", "numpy ms", "ratio (numpy/warp)")
+    widths = [max(len(r[i]) for r in rows + [header]) for i in range(4)]
+    line = " | ".join(f"{{:{'<' if i == 0 else '>'}{w}}}" for i, w in enumerate(widths))
+    print(line.format(*header))
+    print("-+-".join("-" * w for w in widths))
+    for r in rows:
+        print(line.format(*r))
+    a = report["agreement"]
+    print(f"numpy vs warp, max relative difference: clt {a['clt_max_rel_diff']:.2e}, "
+          f"corr {a['corr_max_rel_diff']:.2e}")
+    print(f"warp process() end to end (prepare + all stages, one call): {report['warp_process_ms']:.1f} ms")
+    print(f"paper: {report['paper']['tp_ms']:.0f} ms for the whole TP on a {report['paper']['gpu']} "
+          f"(only meaningful beside CUDA timings)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,243 @@
+"""Vectorised float32 NumPy tile processor: the CPU peer the Warp kernels are benchmarked against.
+
+Same math as ``kernels/convert.py`` and ``kernels/correlate.py`` (tile_processor.md §1.4, §3.1, §6.2, §6.3), batched
+over all tiles with matrix products; Python loops run only over cameras, pairs and quadrants. Float32
+throughout. Not the oracle: that is ``tpnet_gpu.reference`` (float64), which this module deliberately does not
+import (tests/test_bench_numpy.py checks both). No aberration kernels, no validity masks: inputs must be finite.
+
+Convert, per camera (all tiles at once):
+    p = centre - 8, itl = floor(p + 0.5), s = itl - p
+    x = 16x16 window at (itl_y, itl_x), pixels read with the pair-preserving clamp (via a padded frame)
+    x_c = x * mask_c (zero-fill Bayer mask of colour c = R, B, G, green scaled by 0.5; mono: no mask)
+    F_q = Bv[q >> 1] @ x_c @ Bh[q & 1].T    (q = CC, SC, CS, SS)
+with the closed-form per-tile bases (§13) B[phi](s)[k, n] = 1/2 w(n + s) phi(omega_k (n + s + 4.5)), phi = cos,
+sin, Bh from s_x and Bv from s_y: batched small matmuls over all tiles, as in the Warp kernel. The bases of all
+tiles come from one GEMM (they are a fixed linear function of cos/sin of pi s / 16 and omega_k s).
+
+Correlate, per pair (all tiles at once): the conjugate bicomplex product conj(A_c) B_c per colour, summed with
+per-frequency colour weights (w_R, w_B times L(sigma_rb), w_G) - one einsum for the 16 quadrant products A_i B_j,
+one matmul with their signs -, the fat-zero normalisation, L(sigma_corr), then one GEMM with the fixed
+(256 -> 225) frequency-to-lag matrix sum_q kron(L_{q>>1}, L_{q&1}) (§6.3).
+
+Work buffers are allocated once per call and reused across cameras / pairs: fresh large temporaries cost a page
+fault per 4 KiB on every use, which on small VMs is a visible share of the run time.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from tpnet_gpu import tables
+
+N = tables.DTT_SIZE  # 8
+WIN = tables.TILE_SIZE  # 16
+SIDE = 2 * tables.CORR_RADIUS + 1  # 15
+PAD = 18  # even (keeps the Bayer parity) and >= 17 (any window corner can be moved onto the padded frame)
+
+__all__ = ["numpy_convert", "numpy_correlate"]
+
+
+# --- convert ----------------------------------------------------------------------------------------------------
+def _split_centres(centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Integer window corner (int64) and residual s (float32) of centres ``(T, 2)`` (x, y), float32 arithmetic."""
+    p = centres - np.float32(N)
+    itl = np.floor(p + np.float32(0.5))
+    return itl.astype(np.int64), itl - p
+
+
+def _pair_clamp(q: np.ndarray, size: int) -> np.ndarray:
+    """Pair-preserving clamp: q < 0 -> q & 1, q >= size -> size - 2 + (q & 1)."""
+    return np.where(q < 0, q & 1, np.where(q >= size, size - 2 + (q & 1), q))
+
+
+def _padded_corner(itl: np.ndarray, size: int) -> np.ndarray:
+    """Corner in the padded frame of windows with image corner ``itl``; windows wholly off the image are moved
+    next to it by an even amount (they read only parity-dependent clamped pixels, so nothing changes)."""
+    corner = np.where(itl < -WIN, -WIN - (itl & 1), itl)
+    corner = np.where(corner > size, size + ((corner - size) & 1), corner)
+    return corner + PAD
+
+
+def _windows(frame: np.ndarray, itl: np.ndarray) -> np.ndarray:
+    """16x16 windows ``(T, 16, 16)`` of one frame ``(H, W)`` at integer corners ``itl (T, 2)``, pair-clamped."""
+    height, width = frame.shape
+    rows = _pair_clamp(np.arange(-PAD, height + PAD), height)
+    cols = _pair_clamp(np.arange(-PAD, width + PAD), width)
+    padded = frame[np.ix_(rows, cols)]
+    views = sliding_window_view(padded, (WIN, WIN))  # (H + 2 PAD - 15, W + 2 PAD - 15, 16, 16), no copy
+    return views[_padded_corner(itl[:, 1], height), _padded_corner(itl[:, 0], width)]
+
+
+def _colour_masks(cfa: str | None) -> np.ndarray:
+    """Zero-fill masks ``(4, colours, 16, 16)`` per window-corner parity 2 (itl_y & 1) + (itl_x & 1); G carries 0.5.
+
+    Mono (``cfa`` None): one all-ones colour.
+    """
+    if cfa is None:
+        return np.ones((4, 1, WIN, WIN), dtype=np.float32)
+    scale = np.array([1.0, 1.0, tables.GREEN_PRESCALE], dtype=np.float32)
+    colour = tables.cfa_colour_index(cfa, WIN + 2, WIN + 2)
+    masks = np.zeros((4, 3, WIN, WIN), dtype=np.float32)
+    for parity in range(4):
+        py, px = parity >> 1, parity & 1
+        window = colour[py : py + WIN, px : px + WIN]
+        for c in range(3):
+            masks[parity, c] = np.where(window == c, scale[c], 0.0)
+    return masks
+
+
+def _basis_expansion() -> np.ndarray:
+    """Fixed ``(32, 256)`` matrix E with basis(s).flat = features(s) @ E (see ``_basis``), float64 -> float32.
+
+    With alpha_n = pi (2n + 1) / 32, theta_nk = omega_k (n + 4.5), beta = pi s / 16 and gamma_k = omega_k s:
+    1/2 w(n + s) cos|sin(omega_k (n + s + 4.5)) = 1/2 sin(alpha_n + beta) cos|sin(theta_nk + gamma_k), which the
+    angle-sum formulas expand into 4 products cos|sin(beta) x cos|sin(gamma_k) with fixed coefficients.
+    """
+    n = np.arange(WIN)[:, None]
+    alpha = np.pi * (2 * n + 1) / 32.0  # (16, 1)
+    theta = (n + 4.5) * tables.omega()[None, :]  # (16, 8)
+    sa, ca, st, ct = np.sin(alpha), np.cos(alpha), np.sin(theta), np.cos(theta)
+    coef = 0.5 * np.array(
+        [  # [feature, phi = cos | sin, n, k]
+            [sa * ct, sa * st],  # cos(beta) cos(gamma_k)
+            [-sa * st, sa * ct],  # cos(beta) sin(gamma_k)
+            [ca * ct, ca * st],  # sin(beta) cos(gamma_k)
+            [-ca * st, ca * ct],  # sin(beta) sin(gamma_k)
+        ]
+    )
+    # Feature (j, k') feeds only the columns of frequency k = k': [j, k', n, phi, k].
+    expansion = np.einsum("jpnk,kl->jlnpk", coef, np.eye(N))
+    return expansion.reshape(4 * N, WIN * 2 * N).astype(np.float32)
+
+
+_BASIS_EXPANSION = _basis_expansion()
+
+
+def _basis(s: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """Per-tile forward bases into ``out (T, 16, 16)`` [n, (phi, k)] = 1/2 w(n + s) phi(omega_k (n + s + 4.5)).
+
+    One GEMM: features (T, 32) = [cos b cos g_k, cos b sin g_k, sin b cos g_k, sin b sin g_k] (b = pi s / 16,
+    g_k = omega_k s) times the fixed expansion (``_basis_expansion``). Only 9 angles per tile are evaluated and
+    the phase omega_k (n + 4.5) stays exact (float64 table).
+    """
+    beta = (np.float32(np.pi / 16) * s)[:, None, None]  # (T, 1, 1)
+    gamma = (s[:, None] * tables.omega().astype(np.float32)[None, :])[:, None, :]  # (T, 1, 8)
+    cb, sb, cg, sg = np.cos(beta), np.sin(beta), np.cos(gamma), np.sin(gamma)
+    features = np.concatenate([cb * cg, cb * sg, sb * cg, sb * sg], axis=1)  # (T, 4, 8)
+    np.matmul(features.reshape(-1, 4 * N), _BASIS_EXPANSION, out=out.reshape(-1, WIN * 2 * N))
+    return out
+
+
+def numpy_convert(frames, centres, cfa: str | None = tables.DEFAULT_CFA) -> np.ndarray:
+    """CLT tiles ``(tiles, cams, colours, 4, 8, 8)`` float32 of raw frames at per-camera tile centres.
+
+    frames: ``(cams, H, W)`` raw Bayer mosaics in ``cfa`` (or mono for ``cfa=None``), float32 (other dtypes are
+    converted once); centres: ``(tiles, cams, 2)`` (x, y) in pixels, finite. Colours R, B, G (or 1 for mono);
+    quadrants CC, SC, CS, SS.
+    """
+    frames = np.asarray(frames, dtype=np.float32)
+    centres = np.asarray(centres, dtype=np.float32)
+    if frames.ndim != 3 or centres.ndim != 3 or centres.shape[1:] != (frames.shape[0], 2):
+        raise ValueError(
+            f"frames, centres: expected (cams, H, W) and (tiles, cams, 2), got {frames.shape} and {centres.shape}"
+        )
+    cams = frames.shape[0]
+    tiles = centres.shape[0]
+    masks = _colour_masks(cfa)
+    colours = masks.shape[1]
+    clt = np.empty((tiles, cams, colours, 4, N, N), dtype=np.float32)
+    # Work buffers, reused for every camera.
+    x = np.empty((tiles, colours, WIN, WIN), dtype=np.float32)  # masked windows [row, col]
+    bh = np.empty((tiles, WIN, 2 * N), dtype=np.float32)  # [n, (phi_x, kx)]
+    bv = np.empty((tiles, WIN, 2 * N), dtype=np.float32)  # [n, (phi_y, ky)]
+    h = np.empty((tiles, colours, WIN, 2 * N), dtype=np.float32)  # [row, (phi_x, kx)]
+    for cam in range(cams):
+        itl, s = _split_centres(centres[:, cam])
+        windows = _windows(frames[cam], itl)  # (T, 16, 16)
+        parity = 2 * (itl[:, 1] & 1) + (itl[:, 0] & 1)
+        np.take(masks, parity, axis=0, out=x, mode="clip")  # (mode "raise" would buffer the output)
+        x *= windows[:, None]
+        _basis(s[:, 0], out=bh)
+        _basis(s[:, 1], out=bv)
+        np.matmul(x, bh[:, None], out=h)  # both horizontal transforms of every row
+        bv_t = bv.transpose(0, 2, 1)[:, None]  # (T, 1, (phi_y, ky), n)
+        for q in range(4):  # F_q = Bv[q >> 1] @ x @ Bh[q & 1].T, written in place
+            rows, cols = slice(N * (q >> 1), N * (q >> 1) + N), slice(N * (q & 1), N * (q & 1) + N)
+            np.matmul(bv_t[:, :, rows], h[..., cols], out=clt[:, cam, :, q])
+    return clt
+
+
+# --- correlate --------------------------------------------------------------------------------------------------
+def _conj_product_signs() -> np.ndarray:
+    """Signs ``(4, 16)`` [q, (i, j)] of conj(A) * B per frequency (§6.2): X_q = sum_ij signs[q, ij] A_i B_j."""
+    terms = (
+        ((0, 0, 1), (1, 1, 1), (2, 2, 1), (3, 3, 1)),  # CC = A0 B0 + A1 B1 + A2 B2 + A3 B3
+        ((0, 1, 1), (1, 0, -1), (2, 3, 1), (3, 2, -1)),  # SC = A0 B1 - A1 B0 + A2 B3 - A3 B2
+        ((0, 2, 1), (2, 0, -1), (1, 3, 1), (3, 1, -1)),  # CS = A0 B2 - A2 B0 + A1 B3 - A3 B1
+        ((0, 3, 1), (3, 0, 1), (1, 2, -1), (2, 1, -1)),  # SS = A0 B3 + A3 B0 - A1 B2 - A2 B1
+    )
+    signs = np.zeros((4, 4, 4), dtype=np.float32)
+    for q, quadrant in enumerate(terms):
+        for i, j, sign in quadrant:
+            signs[q, i, j] = sign
+    return signs.reshape(4, 16)
+
+
+_CONJ_PRODUCT_SIGNS = _conj_product_signs()
+
+
+def _lag_matrix() -> np.ndarray:
+    """Fixed frequency-to-lag map ``(256, 225)``: corr.flat = X.flat @ M, with
+    corr = sum_q L_{q>>1} X_q L_{q&1}^T and L_sine = 1/2 unfold(sine, 7) @ dtt2e(sine), ``(15, 8)`` (§6.3)."""
+    lags = [0.5 * tables.unfold_matrix(sine, tables.CORR_RADIUS) @ tables.dtt2e_matrix(sine) for sine in (False, True)]
+    m = np.stack([np.einsum("ma,nb->abmn", lags[q >> 1], lags[q & 1]) for q in range(4)])  # [q, ky, kx, my, mx]
+    return m.reshape(4 * N * N, SIDE * SIDE).astype(np.float32)
+
+
+def numpy_correlate(
+    clt,
+    pairs=tables.QUAD_PAIRS,
+    colour_weights=None,
+    fat_zero: float = tables.CORR_FAT_ZERO,
+    sigma_rb: float = tables.CORR_SIGMA_RB,
+    sigma_corr: float | None = None,
+) -> np.ndarray:
+    """Pixel-domain pair correlations ``(tiles, len(pairs), 15, 15)`` float32 of CLT tiles.
+
+    clt: ``(tiles, cams, colours, 4, 8, 8)`` (colours 3 = R, B, G or 1 = mono); pairs: (first, second) cameras.
+    Defaults as the GPU path: weights (0.25, 0.25, 0.5) or (1,), sigma_corr 0.9 or 0.15 (mono); sigmas are
+    variances (tables.lpf). Row = vertical lag + 7, column = horizontal lag + 7.
+    """
+    clt = np.asarray(clt, dtype=np.float32)
+    if clt.ndim != 6 or clt.shape[2] not in (1, 3) or clt.shape[3:] != (4, N, N):
+        raise ValueError(f"clt: expected (tiles, cams, 1 or 3, 4, 8, 8), got {clt.shape}")
+    tiles, _, colours = clt.shape[:3]
+    if colour_weights is None:
+        colour_weights = tables.CORR_COLOUR_WEIGHTS if colours == 3 else (1.0,)
+    if sigma_corr is None:
+        sigma_corr = tables.CORR_SIGMA if colours == 3 else tables.CORR_SIGMA_MONO
+    if len(colour_weights) != colours:
+        raise ValueError(f"colour_weights: expected {colours} values, got {len(colour_weights)}")
+    # X = (w_R P_R + w_B P_B) L_rb + w_G P_G = sum_c weight_c P_c with per-frequency weights (C, 64).
+    weights = np.array(colour_weights, dtype=np.float64)[:, None, None] * np.ones((colours, N, N))
+    if colours == 3:
+        weights[:2] *= tables.lpf(sigma_rb)
+    weights = weights.astype(np.float32).reshape(colours, N * N)
+    lpf_corr = tables.lpf(sigma_corr).astype(np.float32).reshape(N * N)
+    fz2 = np.float32(fat_zero) ** 2
+    to_lags = _lag_matrix()
+    corr = np.empty((tiles, len(pairs), SIDE * SIDE), dtype=np.float32)
+    # Work buffers, reused for every pair.
+    products = np.empty((tiles, 4, 4, N * N), dtype=np.float32)  # [i, j]: sum_c weight_c A_i B_j
+    x = np.empty((tiles, 4, N * N), dtype=np.float32)
+    flat = (tiles, colours, 4, N * N)
+    for p, (a, b) in enumerate(pairs):
+        np.einsum("tcif,tcjf,cf->tijf", clt[:, a].reshape(flat), clt[:, b].reshape(flat), weights, out=products)
+        np.matmul(_CONJ_PRODUCT_SIGNS, products.reshape(tiles, 16, N * N), out=x)  # X = sum_c w_c conj(A_c) B_c
+        norm2 = fz2 + np.einsum("tqf,tqf->tf", x, x)
+        scale = np.zeros_like(norm2)
+        np.divide(lpf_corr, np.sqrt(norm2), out=scale, where=norm2 > 0)  # L_corr / |X|, 0 where |X| = fz = 0
+        x *= scale[:, None]
+        np.matmul(x.reshape(tiles, 4 * N * N), to_lags, out=corr[:, p])
+    return corr.reshape(tiles, len(pairs), SIDE, SIDE)
