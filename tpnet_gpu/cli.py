@@ -36,6 +36,18 @@ def _cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_dataset(args: argparse.Namespace) -> int:
+    from tpnet_gpu.dataset import DatasetSpec, build
+
+    spec = DatasetSpec(scenes=args.scenes, width=args.width, height=args.height, test_fraction=args.test_fraction,
+                       seed=args.seed, supersample=args.supersample)
+    start = time.perf_counter()
+    folder = build(args.out, spec, device=args.device)
+    print(f"data set of {spec.scenes} scenes ({spec.width}x{spec.height}) in {time.perf_counter() - start:.0f} s "
+          f"-> {folder}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tpnet", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -53,6 +65,17 @@ def build_parser() -> argparse.ArgumentParser:
     rend.add_argument("--bits", type=int, default=12, choices=(10, 12, 14, 16), help="sensor bit depth")
     rend.add_argument("--no-noise", action="store_true", help="no photon or read noise")
     rend.set_defaults(func=_cmd_render)
+
+    data = sub.add_parser("dataset", help="build a training/test set from rendered random scenes")
+    data.add_argument("out", help="output folder (existing scene chunks are kept: the build resumes)")
+    data.add_argument("--scenes", type=int, default=40, help="number of scenes")
+    data.add_argument("--width", type=int, default=640, help="frame width, pixels (multiple of 8)")
+    data.add_argument("--height", type=int, default=480, help="frame height, pixels (multiple of 8)")
+    data.add_argument("--test-fraction", type=float, default=0.2, help="share of scenes held out for testing")
+    data.add_argument("--seed", type=int, default=0, help="seed of the scenes and the split")
+    data.add_argument("--supersample", type=int, default=2, help="sub-pixel rays per axis")
+    data.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
+    data.set_defaults(func=_cmd_dataset)
     return parser
 
 

@@ -1,0 +1,121 @@
+"""Training and test data for the network: rendered random scenes run through the tile processor.
+
+Per scene (one compressed NPZ chunk) and per target variant, every tile's 4 network layers ``(4, 9, 9)``
+(float16), its target disparity, and the ground truth (disparity at the tile centre, confidence, spread).
+Variants (network.md §6): ``heuristic`` - targets from the hand-crafted baseline (sweep + refinement; tiles
+it cannot measure get ground truth + a random offset); ``random`` - ground truth + a uniform offset in
++-``random_offset`` px. Scenes are split into train and test by scene. ``manifest.json`` lists the chunks.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from tpnet_gpu.baseline.estimate import BaselineParams, estimate, processor_correlator
+from tpnet_gpu.camera import Rig
+from tpnet_gpu.config import CorrelationConfig
+from tpnet_gpu.scenes import Sensor, random_scene, render
+
+FORMAT = "tpnet-dataset"
+VERSION = 1
+VARIANTS = ("heuristic", "random")
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    """What to build: ``scenes`` random scenes of ``width`` x ``height`` (seeded by ``seed`` + index),
+    ``test_fraction`` of them held out (by scene), targets offset by up to ``random_offset`` px."""
+
+    scenes: int = 40
+    width: int = 640
+    height: int = 480
+    test_fraction: float = 0.2
+    seed: int = 0
+    random_offset: float = 2.0
+    supersample: int = 2
+    fat_zero: float = 0.0
+
+    def split(self) -> list[str]:
+        """'train' / 'test' per scene index, a seeded permutation (at least one test scene when >= 2)."""
+        n_test = int(round(self.scenes * self.test_fraction)) if self.scenes > 1 else 0
+        n_test = max(n_test, 1) if self.scenes > 1 and self.test_fraction > 0 else n_test
+        order = np.random.default_rng(self.seed).permutation(self.scenes)
+        labels = ["train"] * self.scenes
+        for i in order[:n_test]:
+            labels[int(i)] = "test"
+        return labels
+
+
+def _layers(processor, frames, target) -> np.ndarray:
+    """Network layers ``(tiles_y, tiles_x, 4, 9, 9)`` float16 at ``target (tiles_y, tiles_x)``."""
+    layers = processor.process(frames, target.astype(np.float32)).layers.detach().cpu().numpy()
+    return layers.reshape(target.shape + layers.shape[1:]).astype(np.float16)
+
+
+def build_scene(index: int, spec: DatasetSpec, processor, baseline: BaselineParams = BaselineParams()) -> dict:
+    """Render scene ``index`` and return its arrays (see the module docstring)."""
+    rig = Rig(width=spec.width, height=spec.height)
+    rng = np.random.default_rng([spec.seed, index])
+    rendered = render(random_scene(rig, rng), rig, sensor=Sensor(), supersample=spec.supersample,
+                      seed=int(rng.integers(2**31)))
+    frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
+    gt = rendered.tile_disparity.astype(np.float64)
+    shape = gt.shape
+    heuristic = estimate(processor_correlator(processor, frames), shape, baseline).disparity
+    fallback = gt + rng.uniform(-spec.random_offset, spec.random_offset, shape)
+    heuristic = np.where(np.isfinite(heuristic), heuristic, fallback)
+    random = gt + rng.uniform(-spec.random_offset, spec.random_offset, shape)
+    out = {"gt_disparity": gt.astype(np.float32), "gt_confidence": rendered.tile_confidence,
+           "gt_spread": rendered.tile_spread, "scene": np.int32(index)}
+    for name, target in (("heuristic", heuristic), ("random", random)):
+        out[f"target_{name}"] = target.astype(np.float32)
+        out[f"layers_{name}"] = _layers(processor, frames, target)
+    return out
+
+
+def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = None, progress: bool = True) -> Path:
+    """Build the data set into ``folder`` (one NPZ per scene + ``manifest.json``); resumes: chunks already
+    present are kept."""
+    from tqdm import tqdm  # noqa: PLC0415
+
+    from tpnet_gpu.processor import TileProcessor  # noqa: PLC0415 - Warp starts on use
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    processor = TileProcessor(spec.height, spec.width, config=CorrelationConfig(fat_zero=spec.fat_zero), device=device)
+    labels = spec.split()
+    chunks = []
+    for index in tqdm(range(spec.scenes), desc="scenes", disable=not progress):
+        path = folder / f"scene_{index:04d}.npz"
+        if not path.exists():
+            tmp = path.with_suffix(".tmp.npz")
+            np.savez_compressed(tmp, **build_scene(index, spec, processor))
+            tmp.replace(path)
+        chunks.append({"file": path.name, "split": labels[index], "scene": index})
+    manifest = {"format": FORMAT, "version": VERSION, "spec": asdict(spec), "variants": list(VARIANTS),
+                "chunks": chunks}
+    (folder / "manifest.json").write_text(json.dumps(manifest, indent=1))
+    return folder
+
+
+def load(folder, split: str) -> list[dict]:
+    """The chunks of one split ('train' or 'test'), each a dict of arrays as written."""
+    if split not in ("train", "test"):
+        raise ValueError(f"split: expected 'train' or 'test', got {split!r}")
+    folder = Path(folder)
+    manifest_path = folder / "manifest.json"
+    if not manifest_path.exists():
+        raise FileNotFoundError(f"{manifest_path}: no data set manifest (build one with `tpnet dataset`)")
+    manifest = json.loads(manifest_path.read_text())
+    if manifest.get("format") != FORMAT:
+        raise ValueError(f"{manifest_path}: expected format {FORMAT!r}, got {manifest.get('format')!r}")
+    out = []
+    for chunk in manifest["chunks"]:
+        if chunk["split"] == split:
+            with np.load(folder / chunk["file"]) as data:
+                out.append({key: data[key] for key in data.files})
+    return out
