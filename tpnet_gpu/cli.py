@@ -36,6 +36,24 @@ def _cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_inspect(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from tpnet_gpu.scenes.folder import load
+
+    scene = load(args.folder)
+    cams, height, width = scene.frames.shape
+    print(f"{scene.folder}: {cams} cameras, {width}x{height}, CFA {scene.cfa} (read through rawpy)")
+    for cam in range(cams):
+        f = scene.frames[cam]
+        print(f"  camera {cam}: black-subtracted raw min {f.min():.0f}, mean {f.mean():.1f}, max {f.max():.0f}")
+    for name, value in sorted(scene.ground_truth.items()):
+        v = np.asarray(value, dtype=np.float64)
+        print(f"  ground truth {name}: shape {v.shape}, range {np.nanmin(v):.3f} .. {np.nanmax(v):.3f}")
+    print(f"  rig: baseline {scene.rig.baseline_mm} mm, focal {scene.rig.focal_mm} mm, pixel {scene.rig.pixel_size_mm} mm")
+    return 0
+
+
 def _cmd_dataset(args: argparse.Namespace) -> int:
     from tpnet_gpu.dataset import DatasetSpec, build
 
@@ -65,6 +83,10 @@ def build_parser() -> argparse.ArgumentParser:
     rend.add_argument("--bits", type=int, default=12, choices=(10, 12, 14, 16), help="sensor bit depth")
     rend.add_argument("--no-noise", action="store_true", help="no photon or read noise")
     rend.set_defaults(func=_cmd_render)
+
+    insp = sub.add_parser("inspect", help="read a scene folder back (rawpy) and summarise it")
+    insp.add_argument("folder", help="scene folder (cam*.dng + scene.json)")
+    insp.set_defaults(func=_cmd_inspect)
 
     data = sub.add_parser("dataset", help="build a training/test set from rendered random scenes")
     data.add_argument("out", help="output folder (existing scene chunks are kept: the build resumes)")

@@ -27,3 +27,13 @@ def test_cli_render_and_bad_size(tmp_path, capsys):
     assert load(tmp_path / "s").frames.shape == (4, 48, 64)
     assert main(["render", str(tmp_path / "t"), "--width", "60", "--height", "48"]) == 2
     assert "rig: expected a sensor size in multiples of 8, got 60x48" in capsys.readouterr().err
+
+
+def test_cli_inspect_reads_back(tmp_path, capsys):
+    assert main(["render", str(tmp_path / "s"), "--width", "64", "--height", "48", "--supersample", "1"]) == 0
+    capsys.readouterr()
+    assert main(["inspect", str(tmp_path / "s")]) == 0
+    out = capsys.readouterr().out
+    assert "4 cameras, 64x48, CFA GRBG (read through rawpy)" in out and "tile_disparity" in out
+    assert main(["inspect", str(tmp_path / "missing")]) == 2
+    assert "missing scene.json" in capsys.readouterr().err
