@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from tpnet_gpu import dataset
+from tpnet_gpu.baseline.estimate import BASELINE_CORRELATION
 from tpnet_gpu.dataset import DatasetSpec
 
 SPEC = DatasetSpec(scenes=3, width=64, height=48, test_fraction=0.34, seed=4, supersample=1)
@@ -41,16 +42,17 @@ def test_chunk_contents(built):
 
 def test_build_resumes_and_rebuilds_identically(built, tmp_path):
     first = dataset.load(built, "test")[0]
-    again = dataset.build_scene(int(first["scene"]), SPEC, _processor())
+    again = dataset.build_scene(int(first["scene"]), SPEC, _processor(), _processor(BASELINE_CORRELATION))
     np.testing.assert_array_equal(again["gt_disparity"], first["gt_disparity"])
     np.testing.assert_array_equal(again["layers_random"], first["layers_random"])  # deterministic per seed
 
 
-def _processor():
+def _processor(config=None):
     from tpnet_gpu.config import CorrelationConfig
     from tpnet_gpu.processor import TileProcessor
 
-    return TileProcessor(SPEC.height, SPEC.width, config=CorrelationConfig(fat_zero=SPEC.fat_zero), device="cpu")
+    config = config or CorrelationConfig(fat_zero=SPEC.fat_zero)
+    return TileProcessor(SPEC.height, SPEC.width, config=config, device="cpu")
 
 
 def test_bad_split_and_missing_manifest(tmp_path):

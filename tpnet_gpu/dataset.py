@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tpnet_gpu.baseline.estimate import BaselineParams, estimate, processor_correlator
+from tpnet_gpu.baseline.estimate import BASELINE_CORRELATION, BaselineParams, estimate, processor_correlator
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import CorrelationConfig
 from tpnet_gpu.scenes import Sensor, random_scene, render
@@ -37,7 +37,7 @@ class DatasetSpec:
     seed: int = 0
     random_offset: float = 2.0
     supersample: int = 2
-    fat_zero: float = 0.0
+    fat_zero: float = 1.0e4  # as the baseline: keeps noise-only frequencies from dominating the layers
 
     def split(self) -> list[str]:
         """'train' / 'test' per scene index, a seeded permutation (at least one test scene when >= 2)."""
@@ -56,8 +56,10 @@ def _layers(processor, frames, target) -> np.ndarray:
     return layers.reshape(target.shape + layers.shape[1:]).astype(np.float16)
 
 
-def build_scene(index: int, spec: DatasetSpec, processor, baseline: BaselineParams = BaselineParams()) -> dict:
-    """Render scene ``index`` and return its arrays (see the module docstring)."""
+def build_scene(index: int, spec: DatasetSpec, processor, baseline_processor,
+                baseline: BaselineParams = BaselineParams()) -> dict:
+    """Render scene ``index`` and return its arrays (see the module docstring). ``processor`` makes the
+    network layers; ``baseline_processor`` (correlating as the baseline does) makes the heuristic targets."""
     rig = Rig(width=spec.width, height=spec.height)
     rng = np.random.default_rng([spec.seed, index])
     rendered = render(random_scene(rig, rng), rig, sensor=Sensor(), supersample=spec.supersample,
@@ -65,7 +67,7 @@ def build_scene(index: int, spec: DatasetSpec, processor, baseline: BaselinePara
     frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
     gt = rendered.tile_disparity.astype(np.float64)
     shape = gt.shape
-    heuristic = estimate(processor_correlator(processor, frames), shape, baseline).disparity
+    heuristic = estimate(processor_correlator(baseline_processor, frames), shape, baseline).disparity
     fallback = gt + rng.uniform(-spec.random_offset, spec.random_offset, shape)
     heuristic = np.where(np.isfinite(heuristic), heuristic, fallback)
     random = gt + rng.uniform(-spec.random_offset, spec.random_offset, shape)
@@ -87,13 +89,14 @@ def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = Non
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     processor = TileProcessor(spec.height, spec.width, config=CorrelationConfig(fat_zero=spec.fat_zero), device=device)
+    baseline_processor = TileProcessor(spec.height, spec.width, config=BASELINE_CORRELATION, device=device)
     labels = spec.split()
     chunks = []
     for index in tqdm(range(spec.scenes), desc="scenes", disable=not progress):
         path = folder / f"scene_{index:04d}.npz"
         if not path.exists():
             tmp = path.with_suffix(".tmp.npz")
-            np.savez_compressed(tmp, **build_scene(index, spec, processor))
+            np.savez_compressed(tmp, **build_scene(index, spec, processor, baseline_processor))
             tmp.replace(path)
         chunks.append({"file": path.name, "split": labels[index], "scene": index})
     manifest = {"format": FORMAT, "version": VERSION, "spec": asdict(spec), "variants": list(VARIANTS),
