@@ -22,17 +22,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import peers  # noqa: E402
+import report as report_tools  # noqa: E402
 
-from tpnet_gpu import evaluation  # noqa: E402
 from tpnet_gpu.baseline.estimate import (  # noqa: E402
     BASELINE_CORRELATION, BaselineParams, initial_targets, processor_correlator, refine)
 from tpnet_gpu.camera import Rig  # noqa: E402
 from tpnet_gpu.config import CorrelationConfig  # noqa: E402
 from tpnet_gpu.processor import TileProcessor  # noqa: E402
 from tpnet_gpu.scenes import Optics, Sensor, demo_scene, random_scene, render  # noqa: E402
-
-CLASSES = ("flat", "edge", "low_texture", "all")
-
 
 def log(message: str) -> None:
     print(f"[bench_accuracy] {message}", file=sys.stderr, flush=True)
@@ -94,31 +91,10 @@ def main(argv=None) -> int:
     scenes = [run_scene(i, args, rig) for i in range(args.scenes)]
 
     methods = list(scenes[0]["estimates"])
-    gt = np.concatenate([s["gt"].ravel() for s in scenes])
-    per_scene = [evaluation.tile_classes(s["gt"], s["confidence"], s["spread"]) for s in scenes]
-    masks = {c: np.concatenate([m[c].ravel() for m in per_scene]) for c in CLASSES}
-    s3 = np.concatenate([evaluation.neighbourhood_spread(s["gt"]).ravel() for s in scenes])
-    stats, curves = {}, {}
-    for method in methods:
-        est = np.concatenate([s["estimates"][method].ravel() for s in scenes])
-        stats[method] = {c: evaluation.error_stats(est, gt, masks[c]) for c in CLASSES}
-        curves[method] = [
-            {"spread_low": low, "spread_high": high,
-             **evaluation.error_stats(est, gt, masks["all"] & (s3 >= low) & (s3 < high))}
-            for low, high in zip(evaluation.SPREAD_BINS[:-1], evaluation.SPREAD_BINS[1:])]
-    ours = methods[0]
-    lines = [f"Disparity accuracy, {args.scenes} rendered scenes of {args.width}x{args.height} (quad, 258 mm, "
-             f"noise on), tile classes: tpnet_gpu/evaluation.py; gross = |error| > 1 px, rmse-in = RMSE without them",
-             f"{'method':36} | " + " | ".join(f"{c:^37}" for c in CLASSES),
-             f"{'':36} | " + " | ".join(f"{'rmse rmse-in median gross cover':>37}" for _ in CLASSES),
-             "-" * (39 + 40 * len(CLASSES))]
-    for method in methods:
-        cells = [f"{v['rmse']:6.3f} {v['rmse_inliers']:7.3f} {v['median_abs']:6.3f} {v['gross']:5.1%} {v['coverage']:5.0%}"
-                 for v in (stats[method][c] for c in CLASSES)]
-        lines.append(f"{method:36} | " + " | ".join(f"{cell:>37}" for cell in cells))
-    for key in ("rmse", "rmse_inliers", "median_abs"):
-        lines.append(f"flat tiles, {key} ratio peer / ours: " + ", ".join(
-            f"{m}: {stats[m]['flat'][key] / stats[ours]['flat'][key]:.1f}x" for m in methods[1:]))
+    stats, curves = report_tools.summarise(scenes, methods)
+    title = (f"Disparity accuracy, {args.scenes} rendered scenes of {args.width}x{args.height} (quad, 258 mm, "
+             f"noise on), tile classes: tpnet_gpu/evaluation.py")
+    lines = report_tools.table(stats, title, reference=methods[0])
     print("\n".join(lines))
 
     report = {"bench": "accuracy", "scenes": args.scenes, "width": args.width, "height": args.height,
@@ -126,31 +102,9 @@ def main(argv=None) -> int:
               "optics": str(Optics()), "sensor": str(Sensor()), "stats": stats, "rmse_by_spread": curves, "table": lines}
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(report, indent=1, default=float))
-    _plot(curves, args.png)
+    report_tools.plot(curves, args.png, title)
     log(f"saved {args.json} and {args.png}")
     return 0
-
-
-def _plot(curves, path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for method, bins in curves.items():
-        pts = [(b["spread_low"] if np.isfinite(b["spread_high"]) else 1.5 * b["spread_low"], b["rmse"])
-               for b in bins if b["tiles"] >= 5 and np.isfinite(b["rmse"])]
-        ax.plot([p[0] + 0.05 for p in pts], [p[1] for p in pts], marker="o", label=method)
-    ax.set_xscale("symlog", linthresh=0.25)
-    ax.set_yscale("log")
-    ax.set_xlabel("ground-truth max - min disparity over the 3x3 tiles (bin start), px")
-    ax.set_ylabel("disparity RMSE, px")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
 
 
 if __name__ == "__main__":

@@ -77,3 +77,18 @@ def test_textureless_tiles_are_rejected(texture):
     est = estimate(processor_correlator(tp, frames), rendered.tile_disparity.shape)
     measured = np.isfinite(est.disparity[1:-1, 1:-1])
     assert measured.mean() <= 0.1  # no texture: no confident value (measured 0-4 %)
+
+
+def test_consistency_pass_repairs_a_wrong_period():
+    # A correlator made of synthetic peaks at the true residual (tests/baseline/test_strips.synthetic): one tile
+    # locked onto a wrong period (+6 px) is re-measured from its neighbours' median and repaired.
+    from tests.baseline.test_strips import synthetic
+    from tpnet_gpu.baseline.estimate import Estimate, consistency_pass
+
+    truth = np.full((5, 5), 2.2)
+    correlate = lambda target: synthetic((truth - target).ravel())  # noqa: E731
+    first = Estimate(truth.copy(), np.full((5, 5), 0.5), np.ones((5, 5), dtype=int))
+    first.disparity[2, 2] = 8.2
+    fixed = consistency_pass(correlate, first)
+    assert abs(fixed.disparity[2, 2] - 2.2) < 0.05
+    np.testing.assert_array_equal(np.delete(fixed.disparity.ravel(), 12), np.delete(truth.ravel(), 12))

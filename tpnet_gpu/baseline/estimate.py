@@ -5,6 +5,7 @@ iterative re-correlation at the refined target. Vectorised over tiles (NumPy); t
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -134,10 +135,36 @@ def refine(correlate: Correlator, target: np.ndarray, params: BaselineParams = B
     return Estimate(disparity, strength, passes, history)
 
 
+def neighbour_median(values: np.ndarray) -> np.ndarray:
+    """Median of the finite values among each tile's 8 neighbours, ``(ty, tx)`` (NaN where none)."""
+    padded = np.pad(values, 1, constant_values=np.nan)
+    windows = np.lib.stride_tricks.sliding_window_view(padded, (3, 3)).reshape(values.shape + (9,))
+    ring = np.delete(windows, 4, axis=-1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rings give NaN, as documented
+        return np.nanmedian(ring, axis=-1)
+
+
+def consistency_pass(correlate: Correlator, first: Estimate, params: BaselineParams = BaselineParams()) -> Estimate:
+    """Re-measure the tiles that disagree with their neighbours by more than 1 px (or were not measured),
+    starting from the neighbours' median; keep the new result where it is stronger. This stands in for the
+    original pipeline's tile growing and filtering (geometry_and_lma.md G.3): per-tile sweeps lock onto wrong
+    periods of repetitive textures, which the neighbourhood usually resolves."""
+    median = neighbour_median(first.disparity)
+    suspect = np.isfinite(median) & ~(np.abs(first.disparity - median) <= 1.0)
+    if not suspect.any():
+        return first
+    second = refine(correlate, np.where(suspect, median, np.nan), params)
+    better = suspect & np.isfinite(second.disparity) & ~(second.strength <= first.strength)
+    return Estimate(np.where(better, second.disparity, first.disparity),
+                    np.where(better, second.strength, first.strength),
+                    first.passes + np.where(suspect, second.passes, 0), first.history + second.history)
+
+
 def estimate(correlate: Correlator, shape: tuple[int, int], params: BaselineParams = BaselineParams()) -> Estimate:
-    """The whole baseline: sweep for initial targets, then refine."""
+    """The whole baseline: sweep for initial targets, refine, then one neighbourhood-consistency pass."""
     target, _ = initial_targets(correlate, shape, params)
-    return refine(correlate, target, params)
+    return consistency_pass(correlate, refine(correlate, target, params), params)
 
 
 def processor_correlator(processor, frames, rig=None) -> Correlator:

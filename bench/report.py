@@ -1,0 +1,72 @@
+"""Shared reporting for the accuracy benches: per-class statistics, RMSE vs 3x3 spread, table, PNG plot."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from tpnet_gpu import evaluation
+
+CLASSES = ("flat", "edge", "low_texture", "all")
+
+
+def summarise(scenes: list[dict], methods: list[str]) -> tuple[dict, dict]:
+    """``scenes``: dicts with ``gt``, ``confidence``, ``spread`` ``(ty, tx)`` and ``estimates`` {method: (ty, tx)}.
+    Returns (stats {method: {class: error_stats}}, curves {method: [per spread bin error_stats]})."""
+    gt = np.concatenate([s["gt"].ravel() for s in scenes])
+    per_scene = [evaluation.tile_classes(s["gt"], s["confidence"], s["spread"]) for s in scenes]
+    masks = {c: np.concatenate([m[c].ravel() for m in per_scene]) for c in CLASSES}
+    s3 = np.concatenate([evaluation.neighbourhood_spread(s["gt"]).ravel() for s in scenes])
+    stats, curves = {}, {}
+    for method in methods:
+        est = np.concatenate([s["estimates"][method].ravel() for s in scenes])
+        stats[method] = {c: evaluation.error_stats(est, gt, masks[c]) for c in CLASSES}
+        curves[method] = [
+            {"spread_low": low, "spread_high": high,
+             **evaluation.error_stats(est, gt, masks["all"] & (s3 >= low) & (s3 < high))}
+            for low, high in zip(evaluation.SPREAD_BINS[:-1], evaluation.SPREAD_BINS[1:])]
+    return stats, curves
+
+
+def table(stats: dict, title: str, reference: str) -> list[str]:
+    """Text table: per method and class rmse, rmse without gross errors, median, gross share, coverage;
+    then the flat-tile ratios of every other method to ``reference``."""
+    methods = list(stats)
+    lines = [title + "; gross = |error| > 1 px, rmse-in = RMSE without them",
+             f"{'method':36} | " + " | ".join(f"{c:^37}" for c in CLASSES),
+             f"{'':36} | " + " | ".join(f"{'rmse rmse-in median gross cover':>37}" for _ in CLASSES),
+             "-" * (39 + 40 * len(CLASSES))]
+    for method in methods:
+        cells = [f"{v['rmse']:6.3f} {v['rmse_inliers']:7.3f} {v['median_abs']:6.3f} {v['gross']:5.1%} {v['coverage']:5.0%}"
+                 for v in (stats[method][c] for c in CLASSES)]
+        lines.append(f"{method:36} | " + " | ".join(f"{cell:>37}" for cell in cells))
+    for cls in ("flat", "edge", "all"):
+        for key in ("rmse", "rmse_inliers"):
+            lines.append(f"{cls} tiles, {key} ratio method / {reference}: " + ", ".join(
+                f"{m}: {stats[m][cls][key] / stats[reference][cls][key]:.2f}x" for m in methods if m != reference))
+    return lines
+
+
+def plot(curves: dict, path, title: str = "") -> None:
+    """RMSE vs the 3x3 ground-truth spread (the paper's Figure 8), one line per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for method, bins in curves.items():
+        pts = [(b["spread_low"] if np.isfinite(b["spread_high"]) else 1.5 * b["spread_low"], b["rmse_inliers"])
+               for b in bins if b["tiles"] >= 5 and np.isfinite(b["rmse_inliers"])]
+        ax.plot([p[0] + 0.05 for p in pts], [p[1] for p in pts], marker="o", label=method)
+    ax.set_xscale("symlog", linthresh=0.25)
+    ax.set_yscale("log")
+    ax.set_xlabel("ground-truth max - min disparity over the 3x3 tiles (bin start), px")
+    ax.set_ylabel("disparity RMSE without gross errors, px")
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
