@@ -1,0 +1,365 @@
+"""TPNET: the two-stage disparity network (network.md §1-4, §8), as a functional core plus ``TPNet``.
+
+Stage 1 (per tile, shared by every tile) maps the tile's 4 correlation layers and its target disparity
+(325 values) to 32 features; stage 2 combines the features of a 5x5 tile cluster (800 values) into the
+**residual** disparity of the centre tile (predicted disparity = target + residual). Two equivalent forms
+use the same parameters:
+
+* cluster form (training batches): ``(B, 25, 325) -> (B, 3)``, one output per stage-2 clone (§4);
+* whole-frame form (inference, dense training): stage 1 as a matmul over all tiles (a 1x1 convolution),
+  stage 2's first layer as a 5x5 convolution over replicate-padded stage-1 features, the rest per tile.
+
+Convention:
+    * Correlation layers are ordered ``[hor, vert, diag-main, diag-other]``; each is 9x9 (row = vertical
+      shift, col = horizontal shift, -4..+4 px). A tile's input is the layers flattened layer-major then
+      row-major (``layer*81 + row*9 + col``), then the target disparity: 325 values. NaN inputs become 0.
+    * Cluster position ``k = (dy+2)*5 + (dx+2)`` (row-major, centre ``k = 12``); stage 2's input is
+      ``[k*32 + c]``. The equivalent 5x5 kernel is ``kernel[o, c, dy+2, dx+2] = W[o, k*32 + c]``
+      (``nn.Linear`` stores ``W`` as ``(out, in)``).
+    * Clones: 0 = all 5x5 positions, 1 = inner 3x3, 2 = centre only; positions outside a clone's square
+      feed zero features to the shared stage 2.
+    * Frame edges replicate the edge tiles' stage-1 features (= cluster indices clipped to the frame);
+      inactive tiles (``active`` False) have zero stage-1 features, also where replicated.
+
+Nothing here copies to the host: shapes, dtypes and devices are checked from tensor metadata only.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+CORR_LAYERS = 4  # hor, vert, diag-main, diag-other
+CORR_SIZE = 9  # 9x9 crop per layer
+CORR_INPUTS = CORR_LAYERS * CORR_SIZE * CORR_SIZE  # 324
+TILE_INPUTS = CORR_INPUTS + 1  # + target disparity = 325
+CLUSTER_SIDE = 5
+CLUSTER_RADIUS = CLUSTER_SIDE // 2  # 2
+CLUSTER_TILES = CLUSTER_SIDE * CLUSTER_SIDE  # 25
+CENTRE = CLUSTER_TILES // 2  # 12
+CLONE_RADII = (2, 1, 0)  # clone n keeps positions with max(|dy|, |dx|) <= CLONE_RADII[n]
+NEGATIVE_SLOPE = 0.2  # LeakyReLU as coded: max(0.2 x, x)
+STAGE1_WIDTHS = (256, 128, 32)
+STAGE2_WIDTHS = (256, 64, 32, 16)
+
+Layer = tuple[Tensor, Tensor]  # (weight (out, in), bias (out,)) as in nn.Linear
+
+
+# ---------------------------------------------------------------------------------------------- checks
+def _check_tensor(name: str, x, *, floating: bool = True) -> None:
+    if not isinstance(x, Tensor):
+        raise TypeError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
+    if floating and not x.is_floating_point():
+        raise TypeError(f"{name}: expected a floating-point tensor, got {x.dtype}")
+
+
+def _check_like(name: str, x: Tensor, ref: Tensor, ref_name: str) -> None:
+    """``x`` must share ``ref``'s device and dtype."""
+    if x.device != ref.device:
+        raise ValueError(f"{name}: devices do not match ({x.device} vs {ref.device} of {ref_name})")
+    if x.dtype != ref.dtype:
+        raise TypeError(f"{name}: expected dtype {ref.dtype} (that of {ref_name}), got {x.dtype}")
+
+
+def _check_layers(stage1: Sequence[Layer], stage2: Sequence[Layer]) -> None:
+    if len(stage1) < 1 or len(stage2) < 1:
+        raise ValueError(f"stage1/stage2: expected at least one layer each, got {len(stage1)} and {len(stage2)}")
+    if stage1[0][0].shape[1] != TILE_INPUTS:
+        raise ValueError(f"stage1: expected a first layer with {TILE_INPUTS} inputs, got {stage1[0][0].shape[1]}")
+    features = stage1[-1][0].shape[0]
+    if stage2[0][0].shape[1] != CLUSTER_TILES * features:
+        raise ValueError(f"stage2: expected a first layer with {CLUSTER_TILES}*{features} inputs, "
+                         f"got {stage2[0][0].shape[1]}")
+    if stage2[-1][0].shape[0] != 1:
+        raise ValueError(f"stage2: expected a last layer with 1 output, got {stage2[-1][0].shape[0]}")
+
+
+def _clone_list(clone) -> tuple[list[int], bool]:
+    """Clone indices and whether a single one (int) was asked for."""
+    single = isinstance(clone, int) and not isinstance(clone, bool)
+    clones = [clone] if single else list(clone) if isinstance(clone, Sequence) else None
+    if clones is None or not clones or any(
+            not isinstance(c, int) or isinstance(c, bool) or c not in range(len(CLONE_RADII)) for c in clones):
+        raise ValueError(f"clone: expected 0, 1, 2 or a non-empty sequence of them, got {clone!r}")
+    return clones, single
+
+
+# ----------------------------------------------------------------------------------------- functional
+def tile_inputs(layers: Tensor, target: Tensor) -> Tensor:
+    """Stage-1 input vectors of tiles: flattened correlation layers then target disparity, NaN -> 0.
+
+    Args:
+        layers: :math:`(..., 4, 9, 9)` correlation layers ``[hor, vert, diag-main, diag-other]``.
+        target: :math:`(...)` target disparities (px), same leading shape, dtype and device.
+
+    Returns:
+        :math:`(..., 325)` with ``[layer*81 + row*9 + col]`` then the target at index 324.
+
+    >>> tile_inputs(torch.zeros(2, 25, 4, 9, 9), torch.ones(2, 25)).shape
+    torch.Size([2, 25, 325])
+    """
+    _check_tensor("layers", layers)
+    _check_tensor("target", target)
+    if layers.dim() < 3 or tuple(layers.shape[-3:]) != (CORR_LAYERS, CORR_SIZE, CORR_SIZE):
+        raise ValueError(f"layers: expected shape (..., 4, 9, 9), got {tuple(layers.shape)}")
+    if target.shape != layers.shape[:-3]:
+        raise ValueError(f"target: expected shape {tuple(layers.shape[:-3])} (the leading shape of layers), "
+                         f"got {tuple(target.shape)}")
+    _check_like("target", target, layers, "layers")
+    x = torch.cat([layers.reshape(*layers.shape[:-3], CORR_INPUTS), target.unsqueeze(-1)], dim=-1)
+    return x.masked_fill(x.isnan(), 0.0)
+
+
+def gather_clusters(tile_map: Tensor, tile_y: Tensor, tile_x: Tensor) -> Tensor:
+    """5x5 clusters around centre tiles, neighbour indices clipped to the frame (= edge replicate).
+
+    Args:
+        tile_map: :math:`(ty, tx, ...)` any per-tile values (e.g. :func:`tile_inputs` ``(ty, tx, 325)``).
+        tile_y, tile_x: :math:`(B)` integer centre coordinates, on ``tile_map``'s device.
+
+    Returns:
+        :math:`(B, 25, ...)` in cluster order ``k = (dy+2)*5 + (dx+2)``.
+
+    >>> gather_clusters(torch.zeros(3, 4, 325), torch.tensor([0, 2]), torch.tensor([3, 1])).shape
+    torch.Size([2, 25, 325])
+    """
+    _check_tensor("tile_map", tile_map, floating=False)
+    if tile_map.dim() < 2:
+        raise ValueError(f"tile_map: expected shape (ty, tx, ...), got {tuple(tile_map.shape)}")
+    for name, idx in (("tile_y", tile_y), ("tile_x", tile_x)):
+        _check_tensor(name, idx, floating=False)
+        if idx.is_floating_point() or idx.is_complex() or idx.dtype == torch.bool:
+            raise TypeError(f"{name}: expected an integer tensor, got {idx.dtype}")
+        if idx.dim() != 1 or idx.shape != tile_y.shape:
+            raise ValueError(f"{name}: expected shape (B,) like tile_y, got {tuple(idx.shape)}")
+        if idx.device != tile_map.device:
+            raise ValueError(f"{name}: devices do not match ({idx.device} vs {tile_map.device} of tile_map)")
+    ty, tx = tile_map.shape[:2]
+    d = torch.arange(-CLUSTER_RADIUS, CLUSTER_RADIUS + 1, device=tile_map.device)
+    ys = (tile_y[:, None, None] + d[None, :, None]).clamp(0, ty - 1)  # (B, 5, 1)
+    xs = (tile_x[:, None, None] + d[None, None, :]).clamp(0, tx - 1)  # (B, 1, 5)
+    return tile_map[ys, xs].flatten(1, 2)
+
+
+def stage1_features(x: Tensor, stage1: Sequence[Layer]) -> Tensor:
+    """Stage 1 on tile inputs: Linear + LeakyReLU(0.2) for every layer, the last included.
+
+    Args:
+        x: :math:`(..., 325)` tile inputs (NaN-free, see :func:`tile_inputs`).
+        stage1: ``(weight, bias)`` pairs, ``weight`` :math:`(out, in)`.
+
+    Returns:
+        :math:`(..., F)` features, ``F`` = last layer's width (32).
+    """
+    for weight, bias in stage1:
+        x = F.leaky_relu(F.linear(x, weight, bias), NEGATIVE_SLOPE)
+    return x
+
+
+def stage2_output(z: Tensor, stage2: Sequence[Layer]) -> Tensor:
+    """Stage 2 after its input: LeakyReLU(0.2) after each layer but the last (the 1-wide output).
+
+    Args:
+        z: :math:`(..., H)` input of ``stage2[0]`` (``H = 800`` for the cluster form).
+        stage2: ``(weight, bias)`` pairs, the last with one output.
+
+    Returns:
+        :math:`(...)` residual disparities.
+    """
+    for i, (weight, bias) in enumerate(stage2):
+        z = F.linear(z, weight, bias)
+        if i < len(stage2) - 1:
+            z = F.leaky_relu(z, NEGATIVE_SLOPE)
+    return z.squeeze(-1)
+
+
+def clone_masks(device=None, dtype=torch.float32) -> Tensor:
+    """The three clone masks :math:`(3, 5, 5)` (1 inside, 0 outside), built on ``device`` (no host copy).
+
+    >>> clone_masks().sum(dim=(1, 2)).tolist()
+    [25.0, 9.0, 1.0]
+    """
+    d = torch.arange(-CLUSTER_RADIUS, CLUSTER_RADIUS + 1, device=device).abs()
+    cheb = torch.maximum(d[:, None], d[None, :])
+    radii = torch.tensor(CLONE_RADII, device=device)
+    return (cheb[None] <= radii[:, None, None]).to(dtype)
+
+
+def clusters_residual(x: Tensor, stage1: Sequence[Layer], stage2: Sequence[Layer]) -> Tensor:
+    """Cluster form: residual disparity of each cluster's centre tile for the three clones.
+
+    Args:
+        x: :math:`(B, 25, 325)` tile inputs in cluster order ``k = (dy+2)*5 + (dx+2)``; NaN -> 0.
+        stage1, stage2: ``(weight, bias)`` pairs (see :class:`TPNet`).
+
+    Returns:
+        :math:`(B, 3)` residuals of clones ``[5x5, inner 3x3, centre only]``.
+
+    Raises:
+        TypeError / ValueError: ``x`` not a float tensor of shape (B, 25, 325), or not on the parameters'
+        device / dtype.
+    """
+    _check_layers(stage1, stage2)
+    _check_tensor("x", x)
+    if x.dim() != 3 or tuple(x.shape[1:]) != (CLUSTER_TILES, TILE_INPUTS):
+        raise ValueError(f"x: expected shape (B, {CLUSTER_TILES}, {TILE_INPUTS}), got {tuple(x.shape)}")
+    _check_like("x", x, stage1[0][0], "the parameters")
+    features = stage1_features(x.masked_fill(x.isnan(), 0.0), stage1)  # (B, 25, F)
+    masks = clone_masks(x.device, x.dtype).reshape(len(CLONE_RADII), 1, CLUSTER_TILES, 1)
+    z = (features.unsqueeze(0) * masks).flatten(2)  # (3, B, 25*F), [k*F + c]
+    return stage2_output(z, stage2).transpose(0, 1)  # (B, 3)
+
+
+def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stage2: Sequence[Layer], *,
+                   grid: tuple[int, int] | None = None, active: Tensor | None = None, clone=0) -> Tensor:
+    """Whole-frame form: residual disparity of every tile, by convolutions with the cluster form's weights.
+
+    Args:
+        layers: :math:`(ty, tx, 4, 9, 9)`, or :math:`(ty \\cdot tx, 4, 9, 9)` (row-major tiles) with ``grid``.
+        target: :math:`(ty, tx)` (or :math:`(ty \\cdot tx)` with ``grid``) target disparities; NaN -> 0.
+        stage1, stage2: ``(weight, bias)`` pairs (see :class:`TPNet`).
+        grid: ``(ty, tx)``, required for tile-major ``layers``.
+        active: optional :math:`(ty, tx)` bool; inactive tiles get zero stage-1 features.
+        clone: 0, 1 or 2 (5x5, 3x3, centre-only stage 2), or a sequence of them (stage 1 runs once).
+
+    Returns:
+        :math:`(ty, tx)` residuals for an int ``clone``; :math:`(ty, tx, n)` for a sequence of ``n`` clones
+        (clone axis last, as in the cluster form). On the inputs' device.
+
+    Raises:
+        TypeError / ValueError: bad shapes, dtypes (inputs must have the parameters' dtype, ``active`` bool),
+        devices that differ, or a bad ``clone``.
+    """
+    _check_layers(stage1, stage2)
+    clones, single = _clone_list(clone)
+    _check_tensor("layers", layers)
+    _check_tensor("target", target)
+    if grid is not None:
+        if (not isinstance(grid, Sequence) or len(grid) != 2
+                or not all(isinstance(g, int) and not isinstance(g, bool) and g > 0 for g in grid)):
+            raise ValueError(f"grid: expected (tiles_y, tiles_x) of positive ints, got {grid!r}")
+        ty, tx = grid
+    elif layers.dim() == 5:
+        ty, tx = layers.shape[:2]
+    else:
+        raise ValueError(f"layers: expected shape (ty, tx, 4, 9, 9), or (tiles, 4, 9, 9) with grid, "
+                         f"got {tuple(layers.shape)}")
+    tile_shape = (CORR_LAYERS, CORR_SIZE, CORR_SIZE)
+    if tuple(layers.shape) not in ((ty, tx, *tile_shape), (ty * tx, *tile_shape)):
+        raise ValueError(f"layers: expected shape ({ty}, {tx}, 4, 9, 9) or ({ty * tx}, 4, 9, 9), "
+                         f"got {tuple(layers.shape)}")
+    if tuple(target.shape) not in ((ty, tx), (ty * tx,)):
+        raise ValueError(f"target: expected shape ({ty}, {tx}), got {tuple(target.shape)}")
+    _check_like("layers", layers, stage1[0][0], "the parameters")
+    _check_like("target", target, stage1[0][0], "the parameters")
+    if active is not None:
+        _check_tensor("active", active, floating=False)
+        if active.dtype != torch.bool:
+            raise TypeError(f"active: expected dtype torch.bool, got {active.dtype}")
+        if tuple(active.shape) != (ty, tx):
+            raise ValueError(f"active: expected shape ({ty}, {tx}), got {tuple(active.shape)}")
+        if active.device != layers.device:
+            raise ValueError(f"active: devices do not match ({active.device} vs {layers.device} of layers)")
+
+    x = tile_inputs(layers.reshape(ty, tx, *tile_shape), target.reshape(ty, tx))  # (ty, tx, 325)
+    features = stage1_features(x, stage1)  # (ty, tx, F): stage 1 as a matmul over all tiles (1x1 conv)
+    if active is not None:
+        features = torch.where(active.unsqueeze(-1), features, torch.zeros_like(features))
+    n_features = features.shape[-1]
+    padded = F.pad(features.permute(2, 0, 1).unsqueeze(0), (CLUSTER_RADIUS,) * 4, mode="replicate")
+
+    weight, bias = stage2[0]
+    hidden = weight.shape[0]
+    # kernel[o, c, dy+2, dx+2] = W[o, k*F + c], k = (dy+2)*5 + (dx+2); one masked copy per clone.
+    kernel = weight.view(hidden, CLUSTER_TILES, n_features).transpose(1, 2)
+    kernel = kernel.reshape(hidden, n_features, CLUSTER_SIDE, CLUSTER_SIDE)
+    masks = clone_masks(weight.device, weight.dtype)[clones]  # (n, 5, 5)
+    kernels = (kernel.unsqueeze(0) * masks[:, None, None]).flatten(0, 1)  # (n*hidden, F, 5, 5)
+    z = F.conv2d(padded, kernels, bias.repeat(len(clones)))  # (1, n*hidden, ty, tx)
+    z = z.view(len(clones), hidden, ty, tx).permute(2, 3, 0, 1)  # (ty, tx, n, hidden)
+    z = F.leaky_relu(z, NEGATIVE_SLOPE) if len(stage2) > 1 else z
+    residual = stage2_output(z, stage2[1:]) if len(stage2) > 1 else z.squeeze(-1)  # (ty, tx, n)
+    return residual[..., 0] if single else residual
+
+
+# ----------------------------------------------------------------------------------------------- module
+class TPNet(nn.Module):
+    """TPNET with both forms (cluster and whole-frame) on one set of parameters.
+
+    Args:
+        stage1_widths: stage-1 layer widths, default ``(256, 128, 32)`` (``NET_ARCH1 = 13``).
+        stage2_widths: stage-2 hidden widths, default ``(256, 64, 32, 16)`` (``NET_ARCH2 = 9``); an output
+            layer ``16 -> 1`` follows.
+
+    Parameters: Xavier-uniform weights, zero biases (tf-slim defaults). ``stage1[i]`` / ``stage2[i]`` are
+    ``nn.Linear``; ``stage2[-1]`` is the output layer (no activation). Default size: 120 480 + 224 129.
+
+    Shape:
+        - :meth:`forward_clusters` (= ``forward``): :math:`(B, 25, 325) \\to (B, 3)`.
+        - :meth:`forward_frame`: :math:`(ty, tx, 4, 9, 9), (ty, tx) \\to (ty, tx)`.
+
+    >>> net = TPNet()
+    >>> net(torch.zeros(2, 25, 325)).shape
+    torch.Size([2, 3])
+    >>> net.forward_frame(torch.zeros(3, 4, 4, 9, 9), torch.zeros(3, 4)).shape
+    torch.Size([3, 4])
+    """
+
+    def __init__(self, stage1_widths: Sequence[int] = STAGE1_WIDTHS,
+                 stage2_widths: Sequence[int] = STAGE2_WIDTHS) -> None:
+        super().__init__()
+        for name, widths in (("stage1_widths", stage1_widths), ("stage2_widths", stage2_widths)):
+            if (not isinstance(widths, Sequence) or not widths
+                    or not all(isinstance(w, int) and not isinstance(w, bool) and w > 0 for w in widths)):
+                raise ValueError(f"{name}: expected a non-empty sequence of positive ints, got {widths!r}")
+        self.stage1_widths = tuple(stage1_widths)
+        self.stage2_widths = tuple(stage2_widths)
+        s1 = (TILE_INPUTS, *self.stage1_widths)
+        s2 = (CLUSTER_TILES * self.stage1_widths[-1], *self.stage2_widths, 1)
+        self.stage1 = nn.ModuleList(nn.Linear(a, b) for a, b in zip(s1[:-1], s1[1:]))
+        self.stage2 = nn.ModuleList(nn.Linear(a, b) for a, b in zip(s2[:-1], s2[1:]))
+        self.reset_parameters()
+
+    def reset_parameters(self) -> None:
+        """Xavier-uniform weights, zero biases."""
+        for layer in (*self.stage1, *self.stage2):
+            nn.init.xavier_uniform_(layer.weight)
+            nn.init.zeros_(layer.bias)
+
+    def extra_repr(self) -> str:
+        return f"stage1_widths={self.stage1_widths}, stage2_widths={self.stage2_widths}"
+
+    @property
+    def first_layer_weight(self) -> Tensor:
+        """Stage 1's first weight :math:`(256, 325)`, for :func:`tpnet_gpu.net.losses.weights_loss`."""
+        return self.stage1[0].weight
+
+    def _params(self) -> tuple[list[Layer], list[Layer]]:
+        return ([(m.weight, m.bias) for m in self.stage1], [(m.weight, m.bias) for m in self.stage2])
+
+    def forward_clusters(self, x: Tensor) -> Tensor:
+        """Residuals :math:`(B, 3)` of the clones ``[5x5, 3x3, 1x1]`` for clusters :math:`(B, 25, 325)`
+        (see :func:`clusters_residual`)."""
+        return clusters_residual(x, *self._params())
+
+    forward = forward_clusters
+
+    def forward_frame(self, layers: Tensor, target: Tensor, *, grid: tuple[int, int] | None = None,
+                      active: Tensor | None = None, clone=0) -> Tensor:
+        """Residuals :math:`(ty, tx)` (or :math:`(ty, tx, n)` for a sequence of clones) of a whole frame
+        (see :func:`frame_residual`)."""
+        return frame_residual(layers, target, *self._params(), grid=grid, active=active, clone=clone)
+
+    def predict_frame(self, layers: Tensor, target: Tensor, *, grid: tuple[int, int] | None = None,
+                      active: Tensor | None = None, clone=0) -> Tensor:
+        """Predicted disparity :math:`(ty, tx)` = target + residual (NaN targets stay NaN).
+
+        Same arguments as :meth:`forward_frame`; a sequence ``clone`` gives :math:`(ty, tx, n)`.
+        """
+        residual = self.forward_frame(layers, target, grid=grid, active=active, clone=clone)
+        ty, tx = residual.shape[:2]
+        t = target.reshape(ty, tx)
+        return t + residual if residual.dim() == 2 else t.unsqueeze(-1) + residual
