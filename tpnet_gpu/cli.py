@@ -66,6 +66,20 @@ def _cmd_dataset(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_train(args: argparse.Namespace) -> int:
+    import torch
+
+    from tpnet_gpu.net.train import TrainConfig, train
+
+    torch.set_num_threads(args.threads)
+    config = TrainConfig(epochs=args.epochs, batch=args.batch, seed=args.seed, w_mode=args.w_mode)
+    result = train(args.data, args.out, config, checkpoint=args.checkpoint)
+    last = result["history"][-1]
+    print(f"trained {last['epoch']} epochs: loss {last['loss']:.5f}, test RMSE network {last['test_rmse_network']:.4f} "
+          f"px vs its targets {last['test_rmse_target']:.4f} px -> {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tpnet", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -98,6 +112,18 @@ def build_parser() -> argparse.ArgumentParser:
     data.add_argument("--supersample", type=int, default=2, help="sub-pixel rays per axis")
     data.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     data.set_defaults(func=_cmd_dataset)
+
+    tr = sub.add_parser("train", help="train TPNET on a data set (checkpoints resume)")
+    tr.add_argument("data", help="data set folder (from `tpnet dataset`)")
+    tr.add_argument("--out", default="out/tpnet.pt", help="final weights (a recipe .json is written beside)")
+    tr.add_argument("--checkpoint", default="out/tpnet_checkpoint.pt", help="checkpoint file (resumed if present)")
+    tr.add_argument("--epochs", type=int, default=60)
+    tr.add_argument("--batch", type=int, default=4, help="frames per step")
+    tr.add_argument("--seed", type=int, default=0)
+    tr.add_argument("--w-mode", choices=("as_coded", "isotropic"), default="as_coded",
+                    help="Laplacian regulariser of the first layer (network.md §2)")
+    tr.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    tr.set_defaults(func=_cmd_train)
     return parser
 
 

@@ -1,0 +1,184 @@
+"""Training TPNET on data sets built by ``tpnet dataset`` (network.md §4-§7, scaled to our data size).
+
+Dense training: every sample is one scene's whole tile grid and one target variant (heuristic or random);
+the network runs in its whole-frame form (stage 1 once per tile, stage 2 as a 5x5 convolution), so all 5x5
+clusters of a frame share their stage-1 work. Per tile the loss weights follow §5 (ground-truth confidence,
+far-range boost), tiles whose target is more than ``max_offset`` px from the ground truth are left out, and
+hard cases (relative 5x5 ground-truth spread >= 0.4, §6) get half of every batch's weight.
+Loss = sum_n pi_n G_n (clones 5x5, 3x3, 1x1) + 0.1 S (mirror) + 0.5 W (first-layer Laplacian).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from tpnet_gpu.net.losses import main_loss, mirror_loss_frame, weights_loss
+from tpnet_gpu.net.model import TPNet
+
+PARTIAL_WEIGHTS = (2.0, 0.5, 0.2)
+LR_STEPS = ((0.0, 3e-4), (0.15, 1e-4), (0.3, 3e-5), (0.6, 1e-5), (0.9, 3e-6))  # (fraction of epochs, lr), §7
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Training settings. ``epochs`` passes over the training samples (scenes x variants), ``batch`` samples
+    per step; LR schedule §7 scaled to ``epochs``; ``w_mode`` of the Laplacian regulariser."""
+
+    epochs: int = 60
+    batch: int = 4
+    seed: int = 0
+    max_offset: float = 2.0
+    mirror_lambda: float = 0.1
+    weights_lambda: float = 0.5
+    w_mode: str = "as_coded"
+    hard_share: float = 0.5
+    variants: tuple = ("heuristic", "random")
+
+
+def learning_rate(epoch: int, epochs: int) -> float:
+    frac = epoch / max(epochs, 1)
+    return [lr for start, lr in LR_STEPS if frac >= start][-1]
+
+
+def relative_spread(gt: np.ndarray) -> np.ndarray:
+    """5x5 max - min of the ground truth, scaled by 5 / max where max >= 5 (network.md §6), ``(ty, tx)``."""
+    padded = np.pad(gt, 2, mode="edge")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, (5, 5))
+    hi, lo = windows.max(axis=(-2, -1)), windows.min(axis=(-2, -1))
+    v = hi - lo
+    return np.where(hi >= 5.0, v * 5.0 / np.maximum(hi, 1e-9), v)
+
+
+def frame_samples(chunks: list[dict], variants) -> list[dict]:
+    """One sample per (chunk, variant): tensors layers (ty, tx, 4, 9, 9), target, gt, strength, tile weight."""
+    samples = []
+    for chunk in chunks:
+        gt = chunk["gt_disparity"].astype(np.float32)
+        hard = relative_spread(gt) >= 0.4
+        for variant in variants:
+            target = chunk[f"target_{variant}"].astype(np.float32)
+            samples.append({
+                "layers": torch.from_numpy(np.nan_to_num(chunk[f"layers_{variant}"].astype(np.float32))),
+                "target": torch.from_numpy(np.nan_to_num(target)),
+                "gt": torch.from_numpy(gt),
+                "strength": torch.from_numpy(chunk["gt_confidence"].astype(np.float32)),
+                "hard": torch.from_numpy(hard),
+                "scene": int(chunk["scene"]),
+                "variant": variant,
+            })
+    return samples
+
+
+def _tile_weights(sample: dict, config: TrainConfig) -> torch.Tensor:
+    """Per-tile extra weight: 0 off-target (|t - g| > max_offset) or on the frame border; hard/easy balanced."""
+    usable = (sample["target"] - sample["gt"]).abs() <= config.max_offset
+    usable[:1], usable[-1:], usable[:, :1], usable[:, -1:] = False, False, False, False
+    hard = sample["hard"] & usable
+    easy = ~sample["hard"] & usable
+    w = torch.zeros_like(sample["target"])
+    n_hard, n_easy = int(hard.sum()), int(easy.sum())
+    if n_hard and n_easy:
+        w[hard] = config.hard_share / n_hard
+        w[easy] = (1 - config.hard_share) / n_easy
+    elif n_hard or n_easy:
+        w[hard | easy] = 1.0 / (n_hard + n_easy)
+    return w
+
+
+def sample_loss(model: TPNet, sample: dict, config: TrainConfig) -> torch.Tensor:
+    tile_w = _tile_weights(sample, config)
+    pi = torch.tensor(PARTIAL_WEIGHTS) / sum(PARTIAL_WEIGHTS)
+    residual = model.forward_frame(sample["layers"], sample["target"], clone=(0, 1, 2))  # (ty, tx, 3)
+    loss = 0.0
+    for clone in range(3):
+        pred = sample["target"] + residual[..., clone]
+        loss = loss + pi[clone] * main_loss(pred, sample["gt"], sample["strength"], sample["target"], tile_weight=tile_w)
+    full = sample["target"] + residual[..., 0]
+    mirror = mirror_loss_frame(full, sample["gt"], sample["strength"] * (tile_w > 0))
+    return loss + config.mirror_lambda * mirror
+
+
+def evaluate(model: TPNet, samples: list[dict], *, max_offset: float = 2.0, min_strength: float = 0.5) -> dict:
+    """RMSE of the network and of its input targets on the tiles with strength >= ``min_strength``, finite
+    ground truth, |target - gt| <= ``max_offset``, off the border."""
+    net_err, tgt_err = [], []
+    with torch.no_grad():
+        for s in samples:
+            pred = s["target"] + model.forward_frame(s["layers"], s["target"])
+            sel = (s["strength"] >= min_strength) & ((s["target"] - s["gt"]).abs() <= max_offset)
+            sel[:1], sel[-1:], sel[:, :1], sel[:, -1:] = False, False, False, False
+            net_err.append((pred - s["gt"])[sel])
+            tgt_err.append((s["target"] - s["gt"])[sel])
+    net = torch.cat(net_err) if net_err else torch.zeros(0)
+    tgt = torch.cat(tgt_err) if tgt_err else torch.zeros(0)
+    rmse = lambda e: float(torch.sqrt(torch.mean(e**2))) if e.numel() else float("nan")  # noqa: E731
+    return {"tiles": int(net.numel()), "rmse_network": rmse(net), "rmse_target": rmse(tgt)}
+
+
+def train(data_folder, out_path, config: TrainConfig = TrainConfig(), *, checkpoint=None, progress: bool = True,
+          log=print, stop_after: int | None = None) -> dict:
+    """Train from scratch, or resume from ``checkpoint`` (a path written by this function); writes the final
+    weights (state dict + recipe JSON beside it) to ``out_path``. ``stop_after`` ends the run after that
+    epoch as an interruption would (the checkpoint then resumes it). Returns the history."""
+    from tqdm import tqdm  # noqa: PLC0415
+
+    from tpnet_gpu import dataset  # noqa: PLC0415
+
+    torch.manual_seed(config.seed)
+    torch.use_deterministic_algorithms(True)
+    train_samples = frame_samples(dataset.load(data_folder, "train"), config.variants)
+    test_samples = frame_samples(dataset.load(data_folder, "test"), ("heuristic",))
+    if not train_samples:
+        raise ValueError(f"{data_folder}: the data set has no training scenes")
+    model = TPNet()
+    optimiser = torch.optim.Adam(model.parameters(), lr=LR_STEPS[0][1])
+    start_epoch, history = 0, []
+    checkpoint = Path(checkpoint) if checkpoint else None
+    if checkpoint is not None and checkpoint.exists():
+        state = torch.load(checkpoint, weights_only=False)
+        model.load_state_dict(state["model"])
+        optimiser.load_state_dict(state["optimiser"])
+        start_epoch, history = state["epoch"], state["history"]
+        log(f"resumed from {checkpoint} at epoch {start_epoch}")
+    rng = np.random.default_rng(config.seed)
+    for _ in range(start_epoch):  # replay the shuffles so a resumed run is identical to an unbroken one
+        rng.permutation(len(train_samples))
+    last = config.epochs if stop_after is None else min(stop_after, config.epochs)
+    bar = tqdm(range(start_epoch, last), desc="epochs", disable=not progress)
+    for epoch in bar:
+        for group in optimiser.param_groups:
+            group["lr"] = learning_rate(epoch, config.epochs)
+        order = rng.permutation(len(train_samples))
+        total = 0.0
+        for first in range(0, len(order), config.batch):
+            optimiser.zero_grad()
+            batch = [train_samples[i] for i in order[first : first + config.batch]]
+            loss = sum(sample_loss(model, s, config) for s in batch) / len(batch)
+            loss = loss + config.weights_lambda * weights_loss(model.stage1[0].weight, mode=config.w_mode)
+            loss.backward()
+            optimiser.step()
+            total += float(loss.detach()) * len(batch)
+        record = {"epoch": epoch + 1, "loss": total / len(order), "lr": learning_rate(epoch, config.epochs),
+                  **{f"test_{k}": v for k, v in evaluate(model, test_samples).items()}}
+        history.append(record)
+        bar.set_postfix(loss=f"{record['loss']:.4f}", rmse=f"{record['test_rmse_network']:.4f}")
+        if checkpoint is not None:
+            checkpoint.parent.mkdir(parents=True, exist_ok=True)
+            torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch + 1,
+                        "history": history, "config": asdict(config)}, checkpoint)
+    save_weights(model, out_path, {"config": asdict(config), "data": str(data_folder), "history": history})
+    return {"history": history}
+
+
+def save_weights(model: TPNet, path, recipe: dict) -> Path:
+    """Write the state dict (``path``) and its recipe (``path`` with ``.json``)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.save(model.state_dict(), path)
+    path.with_suffix(".json").write_text(json.dumps(recipe, indent=1, default=str))
+    return path
