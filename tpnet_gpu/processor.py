@@ -308,6 +308,11 @@ class TileProcessor:
             self.texture()
         return self._result
 
+    @property
+    def result(self) -> TileResult:
+        """The output views (what ``process`` returns), as the stages last left them."""
+        return self._result
+
     # --- stages (public so benchmarks can time them; ``process`` runs them in order) ----------------------------
     def prepare(self, frames_in, target_disparity=None, *, centres=None, active=None) -> None:
         """Stage 0: map or copy the inputs, pad the frames (pair clamp) and compute the tile centres."""

@@ -87,6 +87,14 @@ def _strip_positions(pair: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 _MATRIX, _INSIDE = _sampling_matrix()
+_TABLES: dict = {}  # (device, dtype) -> the sampling tables there: uploaded once, not per frame
+
+
+def _tables(device, dtype) -> tuple[torch.Tensor, torch.Tensor]:
+    key = (str(device), dtype)
+    if key not in _TABLES:
+        _TABLES[key] = (torch.as_tensor(_MATRIX, dtype=dtype, device=device), torch.as_tensor(_INSIDE, device=device))
+    return _TABLES[key]
 
 
 def _as_tensor(a) -> torch.Tensor:
@@ -105,8 +113,7 @@ def pair_strips(corr):
     c = _as_tensor(corr)
     if c.dim() != 4 or tuple(c.shape[1:]) != (6, STRIP_COLS, STRIP_COLS):
         raise ValueError(f"corr: expected shape (tiles, 6, 15, 15), got {tuple(c.shape)}")
-    matrix = torch.as_tensor(_MATRIX, dtype=c.dtype, device=c.device)
-    inside = torch.as_tensor(_INSIDE, device=c.device)
+    matrix, inside = _tables(c.device, c.dtype)
     flat = c.reshape(c.shape[0], 6, -1)
     strips = torch.einsum("tpi,pio->tpo", flat, matrix)
     strips = torch.where(inside, strips, torch.full_like(strips, float("nan")))
