@@ -23,14 +23,6 @@ ATOL = 1e-12
 A, B = 1 / 6.8, 0.7 / 6.8  # W-loss neighbour coefficients (orthogonal, diagonal)
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Tiny tensors: one CPU thread (2 threads on a busy 2-core machine are much slower)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
 
 def t64(*values):
     return torch.tensor(values, dtype=F64)

@@ -25,14 +25,6 @@ ATOL = 1e-5
 TY, TX = 7, 9
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Tiny tensors: one CPU thread (2 threads on a busy 2-core machine ran the training test ~50x slower)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
 
 @pytest.fixture(params=["cpu", "cuda"])
 def torch_device(request):

@@ -19,13 +19,6 @@ def data(tmp_path_factory):
     return folder
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
 
 def test_loss_falls_and_runs_are_deterministic(data, tmp_path):
     config = TrainConfig(epochs=6, batch=2)
