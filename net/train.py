@@ -171,7 +171,12 @@ def train(data_folder, out_path, config: TrainConfig = TrainConfig(), *, checkpo
             checkpoint.parent.mkdir(parents=True, exist_ok=True)
             torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch + 1,
                         "history": history, "config": asdict(config)}, checkpoint)
-    save_weights(model, out_path, {"config": asdict(config), "data": str(data_folder), "history": history})
+    manifest = json.loads((Path(data_folder) / "manifest.json").read_text())
+    recipe = {"command": f"tpnet dataset {data_folder} --scenes {manifest['spec']['scenes']} && "
+                         f"tpnet train {data_folder} --epochs {config.epochs} --batch {config.batch} --seed {config.seed}",
+              "config": asdict(config), "data": str(data_folder), "dataset_spec": manifest["spec"],
+              "history": history}
+    save_weights(model, out_path, recipe)
     return {"history": history}
 
 

@@ -1,19 +1,40 @@
-"""The ``tpnet`` command line. Oracle for the demo: the disparity the scene was generated at."""
+"""The ``tpnet`` command line: the demo writes its pictures and report, `process` reads a scene folder, bad
+input ends with a one-line message. Oracle for the demo: the rendered ground truth."""
 
-import re
+import json
 import subprocess
 import sys
+
+import numpy as np
+import tifffile
 
 from tpnet_gpu.cli import main
 
 
-def test_demo_recovers_the_generated_disparity(capsys):
-    assert main(["demo"]) == 0
-    out = capsys.readouterr().out
-    errors = [float(m) for m in re.findall(r"median \|error\| ([0-9.]+) px", out)]
-    assert errors and errors[-1] < 0.1  # generated at 2.37 px; every tile within 0.1 px after refinement
+def test_demo_writes_pictures_and_report(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path), "--width", "160", "--height", "128"]) == 0
+    assert "tpnet demo" in capsys.readouterr().out
+    for name in ("disparity.png", "error.png", "texture.png", "correlations.png", "ground_truth.png"):
+        assert (tmp_path / name).stat().st_size > 0
+    report = json.loads((tmp_path / "report.json").read_text())
+    flat = report["stats"]["tpnet"]["flat"]
+    assert flat["tiles"] > 0 and flat["median_abs"] < 0.2  # against the rendered ground truth
+
+
+def test_process_scene_folder_and_bad_inputs(tmp_path, capsys):
+    assert main(["render", str(tmp_path / "s"), "--width", "96", "--height", "64", "--supersample", "1"]) == 0
+    assert main(["process", str(tmp_path / "s"), "--out", str(tmp_path / "o"), "--device", "cpu"]) == 0
+    disparity = tifffile.imread(tmp_path / "o" / "disparity.tif")
+    assert disparity.shape == (8, 12) and np.isfinite(disparity).any()
+    assert (tmp_path / "o" / "texture.png").exists()
+    capsys.readouterr()
+    assert main(["process", str(tmp_path / "a.dng"), str(tmp_path / "b.dng")]) == 2
+    assert "inputs: expected a scene folder or 4 raw files (one per camera), got 2" in capsys.readouterr().err
+    assert main(["process", str(tmp_path / "nothing")]) == 2
 
 
 def test_help_lists_subcommands():
     done = subprocess.run([sys.executable, "-m", "tpnet_gpu.cli", "--help"], capture_output=True, text=True)
-    assert done.returncode == 0 and "demo" in done.stdout
+    assert done.returncode == 0
+    for command in ("demo", "process", "render", "inspect", "dataset", "train"):
+        assert command in done.stdout

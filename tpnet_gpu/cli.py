@@ -9,9 +9,43 @@ import time
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from tpnet_gpu.demo import run_reference_demo
+    from tpnet_gpu.demo import run_demo
 
-    print(run_reference_demo(seed=args.seed))
+    print(run_demo(args.out, width=args.width, height=args.height, seed=args.seed, device=args.device)["text"])
+    return 0
+
+
+def _cmd_process(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    import numpy as np
+    import tifffile
+
+    from tpnet_gpu.demo import _upscale, texture_rgba
+    from tpnet_gpu.images import colour_ramp, save_png
+    from tpnet_gpu.pipeline import Pipeline, load_frames
+
+    if len(args.inputs) not in (1, 4):
+        raise ValueError(f"inputs: expected a scene folder or 4 raw files (one per camera), got {len(args.inputs)}")
+    frames, cfa = load_frames(args.inputs, cfa=args.cfa)
+    cams, height, width = frames.shape
+    if cams != 4:
+        raise ValueError(f"inputs: expected 4 cameras, got {cams}")
+    start = time.perf_counter()
+    result = Pipeline(height, width, cfa=cfa, device=args.device).process(frames)
+    seconds = time.perf_counter() - start
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    disparity = result.disparity.cpu().numpy()
+    tifffile.imwrite(out / "disparity.tif", disparity.astype(np.float32))
+    tifffile.imwrite(out / "confidence.tif", result.confidence.cpu().numpy().astype(np.float32))
+    save_png(out / "disparity.png", _upscale(colour_ramp(disparity, 0.0)))
+    if result.texture is not None:
+        texture = result.texture.cpu().numpy()
+        tifffile.imwrite(out / "texture.tif", texture.astype(np.float32), photometric="minisblack")  # 4 planes R G B A
+        save_png(out / "texture.png", texture_rgba(texture, float(np.nanpercentile(texture[:3], 99.5))))
+    print(f"processed {width}x{height} quad frame ({cfa}) in {seconds:.1f} s -> {out}: disparity.tif/.png "
+          f"({disparity.shape[1]}x{disparity.shape[0]} tiles), confidence.tif, texture.tif/.png")
     return 0
 
 
@@ -83,9 +117,20 @@ def _cmd_train(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tpnet", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="run the tile processor on a built-in generated scene and report")
-    demo.add_argument("--seed", type=int, default=0, help="seed of the generated texture")
+    demo = sub.add_parser("demo", help="the built-in rendered scene through the pipeline: pictures + report")
+    demo.add_argument("--out", default="out/demo", help="output folder")
+    demo.add_argument("--width", type=int, default=640, help="frame width, pixels (multiple of 8)")
+    demo.add_argument("--height", type=int, default=480, help="frame height, pixels (multiple of 8)")
+    demo.add_argument("--seed", type=int, default=0, help="seed of the scene and the noise")
+    demo.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     demo.set_defaults(func=_cmd_demo)
+
+    proc = sub.add_parser("process", help="disparity, confidence and texture of a quad frame (scene folder or 4 raws)")
+    proc.add_argument("inputs", nargs="+", help="a scene folder, or CAM0 CAM1 CAM2 CAM3 raw files (DNG/TIFF)")
+    proc.add_argument("--out", default="out/process", help="output folder")
+    proc.add_argument("--cfa", default=None, help="Bayer pattern of TIFF inputs (e.g. GRBG)")
+    proc.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
+    proc.set_defaults(func=_cmd_process)
 
     rend = sub.add_parser("render", help="render a synthetic quad-camera scene folder (DNGs + ground truth)")
     rend.add_argument("out", help="output folder")

@@ -27,11 +27,13 @@ NETWORK_FAT_ZERO = 1.0e4  # the layers the shipped weights were trained on (tpne
 @dataclass(frozen=True)
 class PipelineConfig:
     """``sweep``: initial target disparities tried (px); ``refine_passes`` of centre-of-mass re-correlation;
-    ``trust``: largest residual believed (px); ``textures``: make the RGBA texture."""
+    ``trust``: largest residual believed (px); ``min_strength``: weakest peak taken as a measurement (as the
+    baseline's refine_min_strength); ``textures``: make the RGBA texture."""
 
     sweep: tuple = (0.0, 6.0, 12.0, 18.0, 24.0, 30.0, 36.0, 42.0)
     refine_passes: int = 2
     trust: float = 4.0
+    min_strength: float = 0.1
     textures: bool = True
 
 
@@ -95,7 +97,8 @@ class Pipeline:
         for value in cfg.sweep:
             target.fill_(value)
             residual, strength = self._residual(frames, target)
-            better = torch.isfinite(residual) & (residual.abs() <= cfg.trust) & (strength > best_s)
+            better = (torch.isfinite(residual) & (residual.abs() <= cfg.trust) & (strength >= cfg.min_strength)
+                      & (strength > best_s))
             best_t.copy_(torch.where(better, target + residual, best_t))
             best_s.copy_(torch.where(better, strength, best_s))
         target.copy_(torch.nan_to_num(best_t, nan=0.0))

@@ -1,0 +1,46 @@
+"""Inference with TPNET on the tile processor's output, on the processor's device, without host copies.
+
+The processor's network layers (a torch view of its Warp buffer, ``TileResult.layers``) and the target
+disparities go straight into the whole-frame form of the network; the result stays on that device.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+
+from tpnet_gpu.net.model import TPNet
+
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+DEFAULT_WEIGHTS = WEIGHTS_DIR / "tpnet_synthetic_v1.pt"
+
+
+def load(path=None, device=None) -> TPNet:
+    """A ``TPNet`` with the weights at ``path`` (default: the shipped ones), in eval mode on ``device``."""
+    path = Path(path) if path is not None else DEFAULT_WEIGHTS
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no TPNET weights there (train some with `tpnet train`)")
+    model = TPNet()
+    model.load_state_dict(torch.load(path, map_location="cpu", weights_only=True))
+    return model.to(device or "cpu").eval()
+
+
+def recipe(path=None) -> dict:
+    """The recipe (command, data set, seed, history) recorded beside the weights."""
+    path = Path(path) if path is not None else DEFAULT_WEIGHTS
+    return json.loads(path.with_suffix(".json").read_text())
+
+
+def infer(model: TPNet, layers: torch.Tensor, target: torch.Tensor, grid: tuple[int, int] | None = None,
+          active: torch.Tensor | None = None) -> torch.Tensor:
+    """Predicted disparity ``(tiles_y, tiles_x)`` from network layers ``(tiles, 4, 9, 9)`` or ``(ty, tx, 4, 9, 9)``
+    (e.g. ``TileResult.layers``) measured at ``target (ty, tx)``; computed on the layers' device, no copies
+    (the tiles axis is viewed as the grid)."""
+    if layers.dim() == 4:
+        if grid is None:
+            raise ValueError("grid: expected (tiles_y, tiles_x) for layers of shape (tiles, 4, 9, 9), got None")
+        layers = layers.view(grid[0], grid[1], *layers.shape[1:])
+    with torch.no_grad():
+        return target + model.forward_frame(layers, target, active=active)
