@@ -38,6 +38,9 @@ class TrainConfig:
     w_mode: str = "as_coded"
     hard_share: float = 0.5
     variants: tuple = ("heuristic", "random")
+    # per-variant loss weights (network.md §5.1 BATCH_WEIGHTS, meant but never applied in the original):
+    # random-offset targets teach large corrections; heuristic ones the precision near the answer
+    variant_weights: tuple = (1.0, 0.1)
 
 
 def learning_rate(epoch: int, epochs: int) -> float:
@@ -158,7 +161,8 @@ def train(data_folder, out_path, config: TrainConfig = TrainConfig(), *, checkpo
         for first in range(0, len(order), config.batch):
             optimiser.zero_grad()
             batch = [train_samples[i] for i in order[first : first + config.batch]]
-            loss = sum(sample_loss(model, s, config) for s in batch) / len(batch)
+            weights = dict(zip(config.variants, config.variant_weights))
+            loss = sum(weights[s["variant"]] * sample_loss(model, s, config) for s in batch) / len(batch)
             loss = loss + config.weights_lambda * weights_loss(model.stage1[0].weight, mode=config.w_mode)
             loss.backward()
             optimiser.step()

@@ -36,5 +36,11 @@ def test_process_scene_folder_and_bad_inputs(tmp_path, capsys):
 def test_help_lists_subcommands():
     done = subprocess.run([sys.executable, "-m", "tpnet_gpu.cli", "--help"], capture_output=True, text=True)
     assert done.returncode == 0
-    for command in ("demo", "process", "render", "inspect", "dataset", "train"):
+    for command in ("demo", "process", "render", "inspect", "dataset", "train", "bench"):
         assert command in done.stdout
+
+
+def test_bench_wrapper_runs_a_script(tmp_path, capsys):
+    json_path = tmp_path / "tp.json"
+    assert main(["bench", "tp", "--height", "32", "--width", "48", "--repeat", "1", "--json", str(json_path)]) == 0
+    assert "convert" in capsys.readouterr().out and json_path.exists()

@@ -106,11 +106,31 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from tpnet_gpu.net.train import TrainConfig, train
 
     torch.set_num_threads(args.threads)
-    config = TrainConfig(epochs=args.epochs, batch=args.batch, seed=args.seed, w_mode=args.w_mode)
+    config = TrainConfig(epochs=args.epochs, batch=args.batch, seed=args.seed, w_mode=args.w_mode,
+                         variant_weights=(1.0, args.random_weight))
     result = train(args.data, args.out, config, checkpoint=args.checkpoint)
     last = result["history"][-1]
     print(f"trained {last['epoch']} epochs: loss {last['loss']:.5f}, test RMSE network {last['test_rmse_network']:.4f} "
           f"px vs its targets {last['test_rmse_target']:.4f} px -> {args.out}")
+    return 0
+
+
+BENCHES = ("tp", "accuracy", "network", "throughput")
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    import runpy
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parent.parent / "bench" / f"bench_{args.name}.py"
+    if not script.exists():
+        raise FileNotFoundError(f"{script}: the benches live in the source checkout's bench/ folder "
+                                "(install with `pip install -e .` from a clone)")
+    sys.argv = [str(script), *args.args]
+    try:
+        runpy.run_path(str(script), run_name="__main__")
+    except SystemExit as done:
+        return int(done.code or 0)
     return 0
 
 
@@ -168,7 +188,16 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--w-mode", choices=("as_coded", "isotropic"), default="as_coded",
                     help="Laplacian regulariser of the first layer (network.md §2)")
     tr.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    tr.add_argument("--random-weight", type=float, default=0.1,
+                    help="loss weight of the random-offset targets relative to the heuristic ones")
     tr.set_defaults(func=_cmd_train)
+
+    bench = sub.add_parser("bench", help="run a benchmark script of bench/ (table + JSON)",
+                           description="Runs bench/bench_NAME.py with the remaining arguments, e.g. "
+                                       "`tpnet bench tp --height 480 --width 640`.")
+    bench.add_argument("name", choices=BENCHES, help="which benchmark")
+    bench.add_argument("args", nargs=argparse.REMAINDER, help="arguments for the script (see its --help)")
+    bench.set_defaults(func=_cmd_bench)
     return parser
 
 
