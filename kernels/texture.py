@@ -231,3 +231,10 @@ def texture_combine(
             acc += weights[base + cam, r, c] * pix[(base + cam) * colours + k, r, c]
         wp.atomic_add(canvas, channel_of_colour[k], y, x, output_gain * fade * acc / total)
     wp.atomic_add(canvas, colours, y, x, fade * w2 * total / float(cams))
+
+
+@wp.kernel
+def clear_canvas(canvas: wp.array3d(dtype=wp.float32)):
+    """canvas = 0, as a launch (so a recorded graph clears it on every replay)."""
+    c, y, x = wp.tid()
+    canvas[c, y, x] = 0.0

@@ -7,6 +7,7 @@ the processor's device: they are overwritten by the next call (clone them to kee
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from dataclasses import dataclass
 
@@ -76,6 +77,9 @@ class TileProcessor:
         config: correlation parameters.
         textures: also make the RGBA texture image in ``process`` (allocates its buffers).
         texture_config: texture parameters.
+        graph: record ``process``'s launches once as a Warp graph (a CUDA graph on the GPU) and replay it
+            for every later frame; inputs are then always staged into the processor's buffers. Default: on
+            CUDA only (plain launches on the CPU).
         device: Warp device ("cpu", "cuda", "cuda:0"); default cuda when present.
     """
 
@@ -91,6 +95,7 @@ class TileProcessor:
         config: CorrelationConfig = CorrelationConfig(),
         textures: bool = False,
         texture_config: TextureConfig = TextureConfig(),
+        graph: bool | None = None,
         device: str | None = None,
     ):
         for name, value in (("height", height), ("width", width)):
@@ -115,6 +120,8 @@ class TileProcessor:
         self.textures = bool(textures)
         self.texture_config = texture_config.resolved(self.colours)
         self.block_dim = 1 if self.device.is_cpu else CUDA_BLOCK_DIM
+        self.graph = self.device.is_cuda if graph is None else bool(graph)
+        self._graphs: dict = {}  # (centres given, textures) -> recorded launches
         self._allocate(offsets)
         self._load_kernels(kernels)
 
@@ -224,7 +231,7 @@ class TileProcessor:
         self._kernels = self._array(k.reshape(-1, 8, 8).astype(np.float32))
 
     # --- inputs --------------------------------------------------------------------------------------------
-    def _frames_array(self, frames_in) -> wp.array:
+    def _frames_array(self, frames_in, *, stage: bool = False) -> wp.array:
         shape = (self.cams, self.height, self.width)
         if isinstance(frames_in, np.ndarray):
             frames_in = torch.from_numpy(frames_in)
@@ -235,7 +242,8 @@ class TileProcessor:
         if frames_in.dtype.is_complex or frames_in.dtype == torch.bool:
             raise TypeError(f"frames: expected real pixel values (float or integer), got {frames_in.dtype}")
         if (
-            frames_in.dtype == torch.float32
+            not stage
+            and frames_in.dtype == torch.float32
             and frames_in.device == self.torch_device
             and frames_in.is_contiguous()
         ):
@@ -301,12 +309,41 @@ class TileProcessor:
         Returns:
             TileResult of torch tensors on the processor's device (views, overwritten by the next call).
         """
-        self.prepare(frames_in, target_disparity, centres=centres, active=active)
-        self.convert()
-        self.correlate()
-        if self.textures:
-            self.texture()
+        if not self.graph:
+            self.prepare(frames_in, target_disparity, centres=centres, active=active)
+            self.convert()
+            self.correlate()
+            if self.textures:
+                self.texture()
+            return self._result
+        frames_wp = self._stage_inputs(frames_in, target_disparity, centres, active, stage=True)
+        key = (centres is not None, self.textures)
+        with self._launching() as stream:
+            if key not in self._graphs:  # record once; every launch reads the processor's own buffers
+                with wp.ScopedCapture(device=self.device, stream=stream) as capture:
+                    self._launch_all(frames_wp, centres is None)
+                self._graphs[key] = capture.graph
+            wp.capture_launch(self._graphs[key], stream=stream)
         return self._result
+
+    def _launch_all(self, frames_wp: wp.array, ideal: bool) -> None:
+        self._launch_prepare(frames_wp, ideal)
+        self._launch_convert()
+        self._launch_correlate()
+        if self.textures:
+            self._launch_texture()
+
+    @contextlib.contextmanager
+    def _launching(self):
+        """Serialise CPU tile launches (platform.md §1) and, on CUDA, run Warp on torch's current stream so
+        torch's input copies and readers of the outputs are ordered with the kernels. Yields the stream."""
+        with _CPU_LAUNCH_LOCK:
+            if self.device.is_cuda:
+                stream = wp.stream_from_torch(torch.cuda.current_stream(self.torch_device))
+                with wp.ScopedStream(stream):
+                    yield stream
+            else:
+                yield None
 
     @property
     def result(self) -> TileResult:
@@ -316,97 +353,117 @@ class TileProcessor:
     # --- stages (public so benchmarks can time them; ``process`` runs them in order) ----------------------------
     def prepare(self, frames_in, target_disparity=None, *, centres=None, active=None) -> None:
         """Stage 0: map or copy the inputs, pad the frames (pair clamp) and compute the tile centres."""
+        frames_wp = self._stage_inputs(frames_in, target_disparity, centres, active)
+        with self._launching():
+            self._launch_prepare(frames_wp, centres is None)
+
+    def _stage_inputs(self, frames_in, target_disparity, centres, active, *, stage: bool = False) -> wp.array:
+        """Check the inputs and copy (or map) them into the processor's buffers; returns the frames' array."""
         if (target_disparity is None) == (centres is None):
             raise ValueError("process: give exactly one of target_disparity and centres")
-        frames_wp = self._frames_array(frames_in)
+        frames_wp = self._frames_array(frames_in, stage=stage)
         self._active_in = self._active_array(active)
+        if stage and active is None:  # a recorded graph reads one fixed mask buffer
+            self._active_t.fill_(True)
+            self._active_in = self._active
         if centres is None:
             self._set_disparity(target_disparity)
         else:
             self._set_centres(centres)
+        return frames_wp
+
+    def _launch_prepare(self, frames_wp: wp.array, ideal: bool) -> None:
         d = self.device
-        with _CPU_LAUNCH_LOCK:
-            if centres is None:
-                wp.launch(
-                    frames.ideal_tile_centres,
-                    dim=(self.tiles_y, self.tiles_x, self.cams),
-                    inputs=[self._disparity, self._offsets],
-                    outputs=[self._centres],
-                    device=d,
-                )
-            wp.launch(frames.pad_frames, dim=self._padded.shape, inputs=[frames_wp], outputs=[self._padded], device=d)
+        if ideal:
+            wp.launch(
+                frames.ideal_tile_centres,
+                dim=(self.tiles_y, self.tiles_x, self.cams),
+                inputs=[self._disparity, self._offsets],
+                outputs=[self._centres],
+                device=d,
+            )
+        wp.launch(frames.pad_frames, dim=self._padded.shape, inputs=[frames_wp], outputs=[self._padded], device=d)
 
     def convert(self) -> None:
         """Stage 1: padded frames and centres -> CLT tiles, finite and valid masks."""
-        with _CPU_LAUNCH_LOCK:
-            wp.launch_tiled(
-                convert.convert_tiles,
-                dim=[self.tiles],
-                inputs=[
-                    self._padded, self._centres, self._active_in, self._masks, self._k_rows, self._n_rows,
-                    self._n_cols, self._k_cols, self._kernels, self._kernel_grid[0], self._kernel_grid[1],
-                    self._use_kernels, self.height, self.width, self.colours,
-                ],
-                outputs=[self._clt, self._finite, self._valid],
-                block_dim=self.block_dim,
-                device=self.device,
-            )
+        with self._launching():
+            self._launch_convert()
 
     def correlate(self) -> None:
         """Stage 2: CLT tiles -> pair correlations (and the network layers for the quad's pairs)."""
-        cfg = self.config
-        with _CPU_LAUNCH_LOCK:
-            wp.launch_tiled(
-                correlate.correlate_tiles,
-                dim=[self.tiles],
-                inputs=[
-                    self._clt, self._finite, self._pairs, self.cams, self.colours, self._colour_weights,
-                    cfg.fat_zero, self._lpf_rb, self._lpf_corr, self._lags_cos, self._lags_sin, self._freqs_cos,
-                    self._freqs_sin,
-                ],
-                outputs=[self._corr],
-                block_dim=self.block_dim,
-                device=self.device,
-            )
-            if self._layers is not None:
-                wp.launch(
-                    correlate.network_layers,
-                    dim=self._layers.shape,
-                    inputs=[self._corr, cfg.net_offset],
-                    outputs=[self._layers],
-                    device=self.device,
-                )
+        with self._launching():
+            self._launch_correlate()
 
     def texture(self) -> None:
         """Stage 3: CLT tiles -> RGBA texture image (needs ``textures=True`` at construction)."""
         if not self.textures:
             raise RuntimeError("texture: this processor was built without textures=True")
+        with self._launching():
+            self._launch_texture()
+
+    def _launch_convert(self) -> None:
+        wp.launch_tiled(
+            convert.convert_tiles,
+            dim=[self.tiles],
+            inputs=[
+                self._padded, self._centres, self._active_in, self._masks, self._k_rows, self._n_rows,
+                self._n_cols, self._k_cols, self._kernels, self._kernel_grid[0], self._kernel_grid[1],
+                self._use_kernels, self.height, self.width, self.colours,
+            ],
+            outputs=[self._clt, self._finite, self._valid],
+            block_dim=self.block_dim,
+            device=self.device,
+        )
+
+    def _launch_correlate(self) -> None:
+        cfg = self.config
+        wp.launch_tiled(
+            correlate.correlate_tiles,
+            dim=[self.tiles],
+            inputs=[
+                self._clt, self._finite, self._pairs, self.cams, self.colours, self._colour_weights,
+                cfg.fat_zero, self._lpf_rb, self._lpf_corr, self._lags_cos, self._lags_sin, self._freqs_cos,
+                self._freqs_sin,
+            ],
+            outputs=[self._corr],
+            block_dim=self.block_dim,
+            device=self.device,
+        )
+        if self._layers is not None:
+            wp.launch(
+                correlate.network_layers,
+                dim=self._layers.shape,
+                inputs=[self._corr, cfg.net_offset],
+                outputs=[self._layers],
+                device=self.device,
+            )
+
+    def _launch_texture(self) -> None:
         tc, d = self.texture_config, self.device
         per_pixel = (self.tiles * self.cams * self.colours, 16, 16)
-        with _CPU_LAUNCH_LOCK:
-            self._canvas.zero_()
-            wp.launch_tiled(
-                texture.texture_imclt,
-                dim=[self.tiles],
-                inputs=[self._clt, self._finite, self.cams, self.colours, self._tex_lpf, self._inv_cos,
-                        self._inv_sin, self._inv_cos_t, self._inv_sin_t],
-                outputs=[self._tex_pix],
-                block_dim=self.block_dim,
-                device=d,
-            )
-            wp.launch(
-                texture.texture_demosaic,
-                dim=per_pixel,
-                inputs=[self._tex_pix, self._finite, self.cams, self.colours, tc.scale_shot, tc.min_shot],
-                outputs=[self._tex_cmp],
-                device=d,
-            )
-            wp.launch(
-                texture.texture_combine,
-                dim=(self.tiles, 16, 16),
-                inputs=[self._tex_pix, self._tex_cmp, self._finite, self.tiles_x, self.tiles_y, self.cams,
-                        self.colours, self._offsets, self._tex_weights_c, self._channel_of_colour, tc.diff_sigma,
-                        tables.TEXTURE_WEIGHT_FLOOR, tc.dust_remove, tc.output_gain],
-                outputs=[self._tex_weights, self._canvas],
-                device=d,
-            )
+        wp.launch(texture.clear_canvas, dim=self._canvas.shape, outputs=[self._canvas], device=d)
+        wp.launch_tiled(
+            texture.texture_imclt,
+            dim=[self.tiles],
+            inputs=[self._clt, self._finite, self.cams, self.colours, self._tex_lpf, self._inv_cos,
+                    self._inv_sin, self._inv_cos_t, self._inv_sin_t],
+            outputs=[self._tex_pix],
+            block_dim=self.block_dim,
+            device=d,
+        )
+        wp.launch(
+            texture.texture_demosaic,
+            dim=per_pixel,
+            inputs=[self._tex_pix, self._finite, self.cams, self.colours, tc.scale_shot, tc.min_shot],
+            outputs=[self._tex_cmp],
+            device=d,
+        )
+        wp.launch(
+            texture.texture_combine,
+            dim=(self.tiles, 16, 16),
+            inputs=[self._tex_pix, self._tex_cmp, self._finite, self.tiles_x, self.tiles_y, self.cams,
+                    self.colours, self._offsets, self._tex_weights_c, self._channel_of_colour, tc.diff_sigma,
+                    tables.TEXTURE_WEIGHT_FLOOR, tc.dust_remove, tc.output_gain],
+            outputs=[self._tex_weights, self._canvas],
+            device=d,
+        )
