@@ -25,7 +25,7 @@ import peers  # noqa: E402
 import report as report_tools  # noqa: E402
 
 from tpnet_gpu.baseline.estimate import (  # noqa: E402
-    BASELINE_CORRELATION, BaselineParams, initial_targets, processor_correlator, refine)
+    BASELINE_CORRELATION, BaselineParams, consistency_pass, initial_targets, processor_correlator, refine)
 from tpnet_gpu.camera import Rig  # noqa: E402
 from tpnet_gpu.config import CorrelationConfig  # noqa: E402
 from tpnet_gpu.processor import TileProcessor  # noqa: E402
@@ -54,7 +54,7 @@ def run_scene(index: int, args, rig: Rig) -> dict:
         correlate = processor_correlator(tp, frames)
         start = time.perf_counter()
         target, _ = initial_targets(correlate, shape, params)
-        est = refine(correlate, target, params)
+        est = consistency_pass(correlate, refine(correlate, target, params), params)
         estimates[name] = est.disparity
         log(f"  {name}: {time.perf_counter() - start:.1f} s, passes {np.bincount(est.passes.ravel()).tolist()}")
         if "initial" not in out:
