@@ -28,9 +28,14 @@ into non-contiguous outputs fall back to a per-matrix loop).
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import torch
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/: the NumPy twin's tables are shared
+from numpy_tp import _basis_expansion, _colour_masks, _conj_product_signs, _lag_matrix  # noqa: E402
 from tpnet_gpu import tables
 
 N = tables.DTT_SIZE  # 8
@@ -60,45 +65,6 @@ def _chunk_size(chunk: int | None, device: torch.device, tiles: int) -> int:
 
 
 # --- convert ----------------------------------------------------------------------------------------------------
-def _colour_masks(cfa: str | None) -> np.ndarray:
-    """Zero-fill masks ``(4, colours, 16, 16)`` per window-corner parity 2 (itl_y & 1) + (itl_x & 1); G carries 0.5.
-
-    Mono (``cfa`` None): one all-ones colour.
-    """
-    if cfa is None:
-        return np.ones((4, 1, WIN, WIN), dtype=np.float32)
-    scale = np.array([1.0, 1.0, tables.GREEN_PRESCALE], dtype=np.float32)
-    colour = tables.cfa_colour_index(cfa, WIN + 2, WIN + 2)
-    masks = np.zeros((4, 3, WIN, WIN), dtype=np.float32)
-    for parity in range(4):
-        py, px = parity >> 1, parity & 1
-        window = colour[py : py + WIN, px : px + WIN]
-        for c in range(3):
-            masks[parity, c] = np.where(window == c, scale[c], 0.0)
-    return masks
-
-
-def _basis_expansion() -> np.ndarray:
-    """Fixed ``(32, 256)`` matrix E with basis(s).flat = features(s) @ E (float64 -> float32).
-
-    With alpha_n = pi (2n + 1) / 32, theta_nk = omega_k (n + 4.5), beta = pi s / 16 and gamma_k = omega_k s:
-    1/2 w(n + s) cos|sin(omega_k (n + s + 4.5)) = 1/2 sin(alpha_n + beta) cos|sin(theta_nk + gamma_k), which the
-    angle-sum formulas expand into 4 products cos|sin(beta) x cos|sin(gamma_k) with fixed coefficients.
-    """
-    n = np.arange(WIN)[:, None]
-    alpha = np.pi * (2 * n + 1) / 32.0  # (16, 1)
-    theta = (n + 4.5) * tables.omega()[None, :]  # (16, 8)
-    sa, ca, st, ct = np.sin(alpha), np.cos(alpha), np.sin(theta), np.cos(theta)
-    coef = 0.5 * np.array(
-        [  # [feature, phi = cos | sin, n, k]
-            [sa * ct, sa * st],  # cos(beta) cos(gamma_k)
-            [-sa * st, sa * ct],  # cos(beta) sin(gamma_k)
-            [ca * ct, ca * st],  # sin(beta) cos(gamma_k)
-            [-ca * st, ca * ct],  # sin(beta) sin(gamma_k)
-        ]
-    )
-    expansion = np.einsum("jpnk,kl->jlnpk", coef, np.eye(N))  # feature (j, k') feeds only frequency k = k'
-    return expansion.reshape(4 * N, WIN * 2 * N)
 
 
 def _basis(s: torch.Tensor, out: torch.Tensor) -> torch.Tensor:
@@ -181,27 +147,6 @@ def torch_convert(frames, centres, cfa: str | None = tables.DEFAULT_CFA, *, chun
 
 
 # --- correlate --------------------------------------------------------------------------------------------------
-def _conj_product_signs() -> np.ndarray:
-    """Signs ``(4, 16)`` [q, (i, j)] of conj(A) * B per frequency (§6.2): X_q = sum_ij signs[q, ij] A_i B_j."""
-    terms = (
-        ((0, 0, 1), (1, 1, 1), (2, 2, 1), (3, 3, 1)),  # CC = A0 B0 + A1 B1 + A2 B2 + A3 B3
-        ((0, 1, 1), (1, 0, -1), (2, 3, 1), (3, 2, -1)),  # SC = A0 B1 - A1 B0 + A2 B3 - A3 B2
-        ((0, 2, 1), (2, 0, -1), (1, 3, 1), (3, 1, -1)),  # CS = A0 B2 - A2 B0 + A1 B3 - A3 B1
-        ((0, 3, 1), (3, 0, 1), (1, 2, -1), (2, 1, -1)),  # SS = A0 B3 + A3 B0 - A1 B2 - A2 B1
-    )
-    signs = np.zeros((4, 4, 4), dtype=np.float32)
-    for q, quadrant in enumerate(terms):
-        for i, j, sign in quadrant:
-            signs[q, i, j] = sign
-    return signs.reshape(4, 16)
-
-
-def _lag_matrix() -> np.ndarray:
-    """Fixed frequency-to-lag map ``(256, 225)``: corr.flat = X.flat @ M, with
-    corr = sum_q L_{q>>1} X_q L_{q&1}^T and L_sine = 1/2 unfold(sine, 7) @ dtt2e(sine), ``(15, 8)`` (§6.3)."""
-    lags = [0.5 * tables.unfold_matrix(sine, tables.CORR_RADIUS) @ tables.dtt2e_matrix(sine) for sine in (False, True)]
-    m = np.stack([np.einsum("ma,nb->abmn", lags[q >> 1], lags[q & 1]) for q in range(4)])  # [q, ky, kx, my, mx]
-    return m.reshape(4 * N * N, SIDE * SIDE)
 
 
 def torch_correlate(
