@@ -88,3 +88,22 @@ def test_textures_and_bad_input():
         tx.photo_texture("lena")
     with pytest.raises(ValueError, match="rig: expected a sensor size in multiples of 8, got 100x96"):
         render(Scene(), Rig(width=100, height=96))
+
+
+def test_rendered_plane_peaks_at_its_disparity_in_the_reference():
+    """The golden reference correlating a rendered plane at target 0: every pair's integer peak sits at
+    -d x the pair's axis (geometry B.2), for d = 2 px."""
+    from tpnet_gpu import reference as ref
+
+    d = 2.0
+    out = render(_plane_scene(d), RIG, supersample=2, noise=False, seed=4)
+    frames = out.raws.astype(np.float64) - out.sensor.black_level
+    centre = np.array([[64.0, 48.0], [40.0, 40.0]])  # two interior tiles (virtual-camera centres), target 0
+    clt = [ref.convert_tiles(ref.bayer_planes(frames[cam]), centre)[0] for cam in range(4)]
+    offsets = np.array(tables.QUAD_OFFSETS)
+    for (a, b) in tables.QUAD_PAIRS:
+        corr = ref.correlate(clt[a], clt[b], fat_zero=0.0, colour_weights=(0.0, 0.0, 1.0))
+        axis = offsets[b] - offsets[a]
+        for tile in corr:
+            iy, ix = np.unravel_index(np.argmax(tile), tile.shape)
+            assert (ix - 7, iy - 7) == tuple(np.round(-d * axis).astype(int))
