@@ -57,8 +57,9 @@ def relative_spread(gt: np.ndarray) -> np.ndarray:
     return np.where(hi >= 5.0, v * 5.0 / np.maximum(hi, 1e-9), v)
 
 
-def frame_samples(chunks: list[dict], variants) -> list[dict]:
-    """One sample per (chunk, variant): tensors layers (ty, tx, 4, 9, 9), target, gt, strength, tile weight."""
+def frame_samples(chunks: list[dict], variants, device="cpu") -> list[dict]:
+    """One sample per (chunk, variant): tensors layers (ty, tx, 4, 9, 9), target, gt, strength, hard-case mask,
+    on ``device`` (the whole data set is small enough to live there)."""
     samples = []
     for chunk in chunks:
         gt = chunk["gt_disparity"].astype(np.float32)
@@ -66,11 +67,11 @@ def frame_samples(chunks: list[dict], variants) -> list[dict]:
         for variant in variants:
             target = chunk[f"target_{variant}"].astype(np.float32)
             samples.append({
-                "layers": torch.from_numpy(np.nan_to_num(chunk[f"layers_{variant}"].astype(np.float32))),
-                "target": torch.from_numpy(np.nan_to_num(target)),
-                "gt": torch.from_numpy(gt),
-                "strength": torch.from_numpy(chunk["gt_confidence"].astype(np.float32)),
-                "hard": torch.from_numpy(hard),
+                "layers": torch.from_numpy(np.nan_to_num(chunk[f"layers_{variant}"].astype(np.float32))).to(device),
+                "target": torch.from_numpy(np.nan_to_num(target)).to(device),
+                "gt": torch.from_numpy(gt).to(device),
+                "strength": torch.from_numpy(chunk["gt_confidence"].astype(np.float32)).to(device),
+                "hard": torch.from_numpy(hard).to(device),
                 "scene": int(chunk["scene"]),
                 "variant": variant,
             })
@@ -95,7 +96,7 @@ def _tile_weights(sample: dict, config: TrainConfig) -> torch.Tensor:
 
 def sample_loss(model: TPNet, sample: dict, config: TrainConfig) -> torch.Tensor:
     tile_w = _tile_weights(sample, config)
-    pi = torch.tensor(PARTIAL_WEIGHTS) / sum(PARTIAL_WEIGHTS)
+    pi = [w / sum(PARTIAL_WEIGHTS) for w in PARTIAL_WEIGHTS]
     residual = model.forward_frame(sample["layers"], sample["target"], clone=(0, 1, 2))  # (ty, tx, 3)
     loss = 0.0
     for clone in range(3):
@@ -124,26 +125,27 @@ def evaluate(model: TPNet, samples: list[dict], *, max_offset: float = 2.0, min_
 
 
 def train(data_folder, out_path, config: TrainConfig = TrainConfig(), *, checkpoint=None, progress: bool = True,
-          log=print, stop_after: int | None = None) -> dict:
+          log=print, stop_after: int | None = None, device: str = "cpu") -> dict:
     """Train from scratch, or resume from ``checkpoint`` (a path written by this function); writes the final
     weights (state dict + recipe JSON beside it) to ``out_path``. ``stop_after`` ends the run after that
-    epoch as an interruption would (the checkpoint then resumes it). Returns the history."""
+    epoch as an interruption would (the checkpoint then resumes it). ``device``: where the data and the model
+    live (runs are bit-reproducible on the CPU). Returns the history."""
     from tqdm import tqdm  # noqa: PLC0415
 
     from tpnet_gpu import dataset  # noqa: PLC0415
 
     torch.manual_seed(config.seed)
-    torch.use_deterministic_algorithms(True)
-    train_samples = frame_samples(dataset.load(data_folder, "train"), config.variants)
-    test_samples = frame_samples(dataset.load(data_folder, "test"), ("heuristic",))
+    torch.use_deterministic_algorithms(True, warn_only=str(device) != "cpu")  # CUDA: some ops have no deterministic kernel
+    train_samples = frame_samples(dataset.load(data_folder, "train"), config.variants, device)
+    test_samples = frame_samples(dataset.load(data_folder, "test"), ("heuristic",), device)
     if not train_samples:
         raise ValueError(f"{data_folder}: the data set has no training scenes")
-    model = TPNet()
+    model = TPNet().to(device)
     optimiser = torch.optim.Adam(model.parameters(), lr=LR_STEPS[0][1])
     start_epoch, history = 0, []
     checkpoint = Path(checkpoint) if checkpoint else None
     if checkpoint is not None and checkpoint.exists():
-        state = torch.load(checkpoint, weights_only=False)
+        state = torch.load(checkpoint, weights_only=False, map_location=device)
         model.load_state_dict(state["model"])
         optimiser.load_state_dict(state["optimiser"])
         start_epoch, history = state["epoch"], state["history"]
@@ -188,6 +190,6 @@ def save_weights(model: TPNet, path, recipe: dict) -> Path:
     """Write the state dict (``path``) and its recipe (``path`` with ``.json``)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    torch.save(model.state_dict(), path)
+    torch.save({k: v.cpu() for k, v in model.state_dict().items()}, path)
     path.with_suffix(".json").write_text(json.dumps(recipe, indent=1, default=str))
     return path

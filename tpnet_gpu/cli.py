@@ -108,7 +108,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     torch.set_num_threads(args.threads)
     config = TrainConfig(epochs=args.epochs, batch=args.batch, seed=args.seed, w_mode=args.w_mode,
                          variant_weights=(1.0, args.random_weight))
-    result = train(args.data, args.out, config, checkpoint=args.checkpoint)
+    device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    result = train(args.data, args.out, config, checkpoint=args.checkpoint, device=device)
     last = result["history"][-1]
     print(f"trained {last['epoch']} epochs: loss {last['loss']:.5f}, test RMSE network {last['test_rmse_network']:.4f} "
           f"px vs its targets {last['test_rmse_target']:.4f} px -> {args.out}")
@@ -188,6 +189,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--w-mode", choices=("as_coded", "isotropic"), default="as_coded",
                     help="Laplacian regulariser of the first layer (network.md §2)")
     tr.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    tr.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     tr.add_argument("--random-weight", type=float, default=0.1,
                     help="loss weight of the random-offset targets relative to the heuristic ones")
     tr.set_defaults(func=_cmd_train)
