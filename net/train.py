@@ -130,12 +130,21 @@ def train(data_folder, out_path, config: TrainConfig = TrainConfig(), *, checkpo
     weights (state dict + recipe JSON beside it) to ``out_path``. ``stop_after`` ends the run after that
     epoch as an interruption would (the checkpoint then resumes it). ``device``: where the data and the model
     live (runs are bit-reproducible on the CPU). Returns the history."""
+    previous = torch.are_deterministic_algorithms_enabled()
+    torch.use_deterministic_algorithms(True, warn_only=str(device) != "cpu")  # CUDA: some ops lack one
+    try:
+        return _train(data_folder, out_path, config, checkpoint=checkpoint, progress=progress, log=log,
+                      stop_after=stop_after, device=device)
+    finally:
+        torch.use_deterministic_algorithms(previous)
+
+
+def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: bool, log, stop_after, device) -> dict:
     from tqdm import tqdm  # noqa: PLC0415
 
     from tpnet_gpu import dataset  # noqa: PLC0415
 
     torch.manual_seed(config.seed)
-    torch.use_deterministic_algorithms(True, warn_only=str(device) != "cpu")  # CUDA: some ops have no deterministic kernel
     train_samples = frame_samples(dataset.load(data_folder, "train"), config.variants, device)
     test_samples = frame_samples(dataset.load(data_folder, "test"), ("heuristic",), device)
     if not train_samples:
