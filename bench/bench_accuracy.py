@@ -12,7 +12,6 @@ paper's Figure 8) as a PNG. Prints a table, saves JSON.
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import sys
 import time
@@ -100,8 +99,7 @@ def main(argv=None) -> int:
     report = {"bench": "accuracy", "scenes": args.scenes, "width": args.width, "height": args.height,
               "seed": args.seed, "machine": {"platform": platform.platform(), "python": platform.python_version()},
               "optics": str(Optics()), "sensor": str(Sensor()), "stats": stats, "rmse_by_spread": curves, "table": lines}
-    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps(report, indent=1, default=float))
+    report_tools.save_json(report, args.json)
     report_tools.plot(curves, args.png, title)
     log(f"saved {args.json} and {args.png}")
     return 0

@@ -11,7 +11,6 @@ the residual. Both are scored on the same tiles and classes (tpnet_gpu/evaluatio
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import sys
 import time
@@ -96,8 +95,7 @@ def main(argv=None) -> int:
     report = {"bench": "network", "scenes": args.scenes, "width": args.width, "height": args.height,
               "seed": args.seed, "passes": args.passes, "machine": platform.platform(), "stats": stats,
               "rmse_by_spread": curves, "table": lines}
-    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps(report, indent=1, default=float))
+    report_tools.save_json(report, args.json)
     report_tools.plot(curves, args.png, title)
     log(f"saved {args.json} and {args.png}")
     return 0

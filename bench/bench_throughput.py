@@ -36,7 +36,6 @@ from __future__ import annotations
 import argparse
 import gc
 import inspect
-import json
 import os
 import platform
 import sys
@@ -53,6 +52,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_tp import PAPER_GPU, PAPER_TP_MS, cpu_model, device_name, summary, timed_ms  # noqa: E402
 from numpy_tp import numpy_convert, numpy_correlate  # noqa: E402
 from torch_tp import torch_convert, torch_correlate, torch_layers  # noqa: E402
+from report import save_json  # noqa: E402
 
 from tpnet_gpu import tables  # noqa: E402
 from tpnet_gpu.net import model as net_model  # noqa: E402
@@ -512,10 +512,7 @@ def main(argv=None) -> dict:
     }
     print_report(report)
     if args.json:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(report, indent=2) + "\n")
-        log(f"wrote {path}")
+        log(f"wrote {save_json(report, args.json)}")
     return report
 
 

@@ -16,7 +16,6 @@ JSON. Progress goes to stderr. To add a stage, add one ``Stage`` entry to ``STAG
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
@@ -32,6 +31,7 @@ import warp as wp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from numpy_tp import numpy_convert, numpy_correlate  # noqa: E402
+from report import save_json  # noqa: E402
 
 from tpnet_gpu import tables  # noqa: E402
 from tpnet_gpu.processor import TileProcessor  # noqa: E402
@@ -223,10 +223,7 @@ def main(argv=None) -> dict:
     }
     print_table(report)
     if args.json:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(report, indent=2) + "\n")
-        log(f"wrote {path}")
+        log(f"wrote {save_json(report, args.json)}")
     return report
 
 

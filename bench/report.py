@@ -70,3 +70,13 @@ def plot(curves: dict, path, title: str = "") -> None:
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
+
+
+def save_json(report: dict, path) -> Path:
+    """Write a bench report as JSON (parent folder created); floats that JSON lacks become numbers."""
+    import json
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(report, indent=1, default=float) + "\n")
+    return path
