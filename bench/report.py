@@ -11,38 +11,48 @@ from tpnet_gpu import evaluation
 CLASSES = ("flat", "edge", "low_texture", "all")
 
 
-def summarise(scenes: list[dict], methods: list[str]) -> tuple[dict, dict]:
+def summarise(scenes: list[dict], methods: list[str], reference: str | None = None) -> tuple[dict, dict]:
     """``scenes``: dicts with ``gt``, ``confidence``, ``spread`` ``(ty, tx)`` and ``estimates`` {method: (ty, tx)}.
-    Returns (stats {method: {class: error_stats}}, curves {method: [per spread bin error_stats]})."""
+    Returns (stats {method: {class: error_stats}}, curves {method: [per spread bin error_stats]}); with a
+    ``reference`` method, stats also hold ``rmse_common`` on the tiles it gets within 1 px (the paper's protocol)."""
     gt = np.concatenate([s["gt"].ravel() for s in scenes])
+    common = None if reference is None else np.concatenate(
+        [evaluation.reference_inliers(s["estimates"][reference], s["gt"]).ravel() for s in scenes])
     per_scene = [evaluation.tile_classes(s["gt"], s["confidence"], s["spread"]) for s in scenes]
     masks = {c: np.concatenate([m[c].ravel() for m in per_scene]) for c in CLASSES}
     s3 = np.concatenate([evaluation.neighbourhood_spread(s["gt"]).ravel() for s in scenes])
     stats, curves = {}, {}
     for method in methods:
         est = np.concatenate([s["estimates"][method].ravel() for s in scenes])
-        stats[method] = {c: evaluation.error_stats(est, gt, masks[c]) for c in CLASSES}
+        stats[method] = {c: evaluation.error_stats(est, gt, masks[c], common) for c in CLASSES}
         curves[method] = [
             {"spread_low": low, "spread_high": high,
-             **evaluation.error_stats(est, gt, masks["all"] & (s3 >= low) & (s3 < high))}
+             **evaluation.error_stats(est, gt, masks["all"] & (s3 >= low) & (s3 < high), common)}
             for low, high in zip(evaluation.SPREAD_BINS[:-1], evaluation.SPREAD_BINS[1:])]
     return stats, curves
 
 
 def table(stats: dict, title: str, reference: str) -> list[str]:
-    """Text table: per method and class rmse, rmse without gross errors, median, gross share, coverage;
-    then the flat-tile ratios of every other method to ``reference``."""
+    """Text table: per method and class rmse, rmse without gross errors, median, gross share, coverage (and
+    ``rmse-ref``, the RMSE on the tiles ``reference`` gets within 1 px, when the stats hold it); then the
+    ratios of every other method to ``reference``."""
     methods = list(stats)
-    lines = [title + "; gross = |error| > 1 px, rmse-in = RMSE without them",
-             f"{'method':36} | " + " | ".join(f"{c:^37}" for c in CLASSES),
-             f"{'':36} | " + " | ".join(f"{'rmse rmse-in median gross cover':>37}" for _ in CLASSES),
-             "-" * (39 + 40 * len(CLASSES))]
+    common = "rmse_common" in stats[methods[0]]["all"]
+    keys = ("rmse", "rmse_inliers") + (("rmse_common",) if common else ())
+    width = 45 if common else 37
+    header = "rmse rmse-in " + ("rmse-ref " if common else "") + "median gross cover"
+    lines = [title + "; gross = |error| > 1 px, rmse-in = RMSE without them"
+             + (f", rmse-ref = RMSE on the tiles {reference} gets within 1 px (the paper's protocol)" if common else ""),
+             f"{'method':36} | " + " | ".join(f"{c:^{width}}" for c in CLASSES),
+             f"{'':36} | " + " | ".join(f"{header:>{width}}" for _ in CLASSES),
+             "-" * (39 + (width + 3) * len(CLASSES))]
     for method in methods:
-        cells = [f"{v['rmse']:6.3f} {v['rmse_inliers']:7.3f} {v['median_abs']:6.3f} {v['gross']:5.1%} {v['coverage']:5.0%}"
+        cells = [f"{v['rmse']:6.3f} {v['rmse_inliers']:7.3f} " + (f"{v['rmse_common']:8.3f} " if common else "")
+                 + f"{v['median_abs']:6.3f} {v['gross']:5.1%} {v['coverage']:5.0%}"
                  for v in (stats[method][c] for c in CLASSES)]
-        lines.append(f"{method:36} | " + " | ".join(f"{cell:>37}" for cell in cells))
+        lines.append(f"{method:36} | " + " | ".join(f"{cell:>{width}}" for cell in cells))
     for cls in ("flat", "edge", "all"):
-        for key in ("rmse", "rmse_inliers"):
+        for key in keys:
             lines.append(f"{cls} tiles, {key} ratio method / {reference}: " + ", ".join(
                 f"{m}: {stats[m][cls][key] / stats[reference][cls][key]:.2f}x" for m in methods if m != reference))
     return lines

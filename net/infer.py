@@ -33,6 +33,22 @@ def recipe(path=None) -> dict:
     return json.loads(path.with_suffix(".json").read_text())
 
 
+def correlation(path=None):
+    """The tile processor's correlation settings the weights at ``path`` were trained on (their recipe's data
+    set: colour weights and fat zero); the layers the network reads must be made with these. Weights without
+    a recipe are taken to come from today's data set (``DatasetSpec()``)."""
+    from tpnet_gpu.config import CorrelationConfig  # noqa: PLC0415
+    from tpnet_gpu.dataset import DatasetSpec  # noqa: PLC0415
+
+    path = Path(path) if path is not None else DEFAULT_WEIGHTS
+    if not path.with_suffix(".json").exists():
+        return DatasetSpec().correlation()
+    spec = recipe(path).get("dataset_spec", {})
+    weights = spec.get("colour_weights")  # absent in data set version 1: the processor's default (as coded)
+    return CorrelationConfig(colour_weights=None if weights is None else tuple(weights),
+                             fat_zero=spec.get("fat_zero", DatasetSpec().fat_zero))
+
+
 def infer(model: TPNet, layers: torch.Tensor, target: torch.Tensor, grid: tuple[int, int] | None = None,
           active: torch.Tensor | None = None) -> torch.Tensor:
     """Predicted disparity ``(tiles_y, tiles_x)`` from network layers ``(tiles, 4, 9, 9)`` or ``(ty, tx, 4, 9, 9)``

@@ -37,10 +37,15 @@ class TrainConfig:
     weights_lambda: float = 0.5
     w_mode: str = "as_coded"
     hard_share: float = 0.5
-    variants: tuple = ("heuristic", "random")
+    variants: tuple = ("heuristic", "random", "near0", "near1")
     # per-variant loss weights (network.md §5.1 BATCH_WEIGHTS, meant but never applied in the original):
-    # random-offset targets teach large corrections; heuristic ones the precision near the answer
-    variant_weights: tuple = (1.0, 0.1)
+    # random-offset targets teach large corrections; heuristic and near ones the precision near the answer
+    variant_weights: tuple = (1.0, 0.3, 1.0, 1.0)
+
+    def __post_init__(self):
+        if len(self.variant_weights) != len(self.variants):
+            raise ValueError(f"variant_weights: expected one weight per variant {self.variants}, "
+                             f"got {self.variant_weights}")
 
 
 def learning_rate(epoch: int, epochs: int) -> float:
@@ -62,6 +67,10 @@ def frame_samples(chunks: list[dict], variants, device="cpu") -> list[dict]:
     on ``device`` (the whole data set is small enough to live there)."""
     samples = []
     for chunk in chunks:
+        missing = [v for v in variants if f"layers_{v}" not in chunk]
+        if missing:
+            raise ValueError(f"variants: the data set has no {missing} targets (it holds "
+                             f"{sorted(k[7:] for k in chunk if k.startswith('layers_'))}); rebuild it or choose others")
         gt = chunk["gt_disparity"].astype(np.float32)
         hard = relative_spread(gt) >= 0.4
         for variant in variants:

@@ -38,20 +38,40 @@ def test_chunk_contents(built):
     assert np.isfinite(chunk["target_heuristic"]).all()
     assert np.isfinite(chunk["layers_heuristic"].astype(np.float32)).all()
     assert chunk["gt_confidence"].min() >= 0 and chunk["gt_confidence"].max() <= 1
+    low, high = SPEC.near_offset
+    for i in range(SPEC.near_draws):  # random sign, |offset| log-uniform in near_offset (float32 rounding)
+        offset = (chunk[f"target_near{i}"].astype(np.float64) - chunk["gt_disparity"]).ravel()
+        assert np.all(np.abs(offset) >= low * 0.99) and np.all(np.abs(offset) <= high * 1.01)
+        assert (offset > 0).any() and (offset < 0).any()
+        assert np.median(np.abs(offset)) < 0.15  # log-uniform: median sqrt(low * high) = 0.05, not 0.25
 
 
 def test_build_resumes_and_rebuilds_identically(built, tmp_path):
     first = dataset.load(built, "test")[0]
     again = dataset.build_scene(int(first["scene"]), SPEC, _processor(), _processor(BASELINE_CORRELATION))
     np.testing.assert_array_equal(again["gt_disparity"], first["gt_disparity"])
-    np.testing.assert_array_equal(again["layers_random"], first["layers_random"])  # deterministic per seed
+    for variant in SPEC.variants():  # deterministic per seed; the layers are the processor's at the targets
+        np.testing.assert_array_equal(again[f"layers_{variant}"], first[f"layers_{variant}"])
+        np.testing.assert_array_equal(again[f"target_{variant}"], first[f"target_{variant}"])
+
+
+def test_network_layers_are_green_only_as_the_baseline():
+    assert SPEC.correlation().colour_weights == (0.0, 0.0, 1.0)
+    assert SPEC.variants() == ("heuristic", "random", "near0", "near1")
+
+
+def test_old_data_set_version_is_refused(built, tmp_path):
+    manifest = json.loads((built / "manifest.json").read_text())
+    manifest["version"] = 1
+    (tmp_path / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(ValueError, match="expected data set version 2, got 1"):
+        dataset.load(tmp_path, "train")
 
 
 def _processor(config=None):
-    from tpnet_gpu.config import CorrelationConfig
     from tpnet_gpu.processor import TileProcessor
 
-    config = config or CorrelationConfig(fat_zero=SPEC.fat_zero)
+    config = config or SPEC.correlation()
     return TileProcessor(SPEC.height, SPEC.width, config=config, device="cpu")
 
 

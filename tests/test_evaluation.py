@@ -26,3 +26,15 @@ def test_classes_and_stats():
     assert np.isclose(stats["rmse_inliers"], np.sqrt(0.25 / 5))
     bins = evaluation.rmse_by_spread(est, gt, cls["all"])
     assert sum(b["tiles"] for b in bins) == cls["all"].sum()
+
+
+def test_reference_inliers_and_common_rmse():
+    # oracle: hand-counted tiles; the common set is chosen by the reference alone
+    gt = np.zeros((2, 3))
+    ref = np.array([[0.1, 2.0, np.nan], [0.0, -0.5, 0.2]])
+    common = evaluation.reference_inliers(ref, gt)
+    np.testing.assert_array_equal(common, [[True, False, False], [True, True, True]])
+    est = np.array([[0.3, 0.0, 0.0], [0.0, 0.4, 5.0]])
+    stats = evaluation.error_stats(est, gt, np.ones((2, 3), bool), common)
+    assert np.isclose(stats["rmse_common"], np.sqrt((0.09 + 0.16 + 25.0) / 4))  # the gross 5.0 stays in
+    assert "rmse_common" not in evaluation.error_stats(est, gt, np.ones((2, 3), bool))

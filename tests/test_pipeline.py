@@ -61,3 +61,8 @@ def test_stream_and_flat_memory(frames, weights):
     after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     assert count == 40
     assert after - before < 20_000  # KiB: no per-frame growth (buffers are allocated once)
+
+
+def test_bad_network_passes():
+    with pytest.raises(ValueError, match="network_passes: expected an int >= 1, got 0"):
+        PipelineConfig(network_passes=0)

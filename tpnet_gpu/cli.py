@@ -107,7 +107,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     torch.set_num_threads(args.threads)
     config = TrainConfig(epochs=args.epochs, batch=args.batch, seed=args.seed, w_mode=args.w_mode,
-                         variant_weights=(1.0, args.random_weight))
+                         variant_weights=tuple(args.random_weight if v == "random" else 1.0 for v in TrainConfig.variants))
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
     result = train(args.data, args.out, config, checkpoint=args.checkpoint, device=device)
     last = result["history"][-1]
@@ -190,8 +190,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="Laplacian regulariser of the first layer (network.md §2)")
     tr.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     tr.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
-    tr.add_argument("--random-weight", type=float, default=0.1,
-                    help="loss weight of the random-offset targets relative to the heuristic ones")
+    tr.add_argument("--random-weight", type=float, default=0.3,
+                    help="loss weight of the random-offset (+-2 px) targets relative to the others")
     tr.set_defaults(func=_cmd_train)
 
     bench = sub.add_parser("bench", help="run a benchmark script of bench/ (table + JSON)",

@@ -4,7 +4,10 @@ Per scene (one compressed NPZ chunk) and per target variant, every tile's 4 netw
 (float16), its target disparity, and the ground truth (disparity at the tile centre, confidence, spread).
 Variants (network.md §6): ``heuristic`` - targets from the hand-crafted baseline (sweep + refinement; tiles
 it cannot measure get ground truth + a random offset); ``random`` - ground truth + a uniform offset in
-+-``random_offset`` px. Scenes are split into train and test by scene. ``manifest.json`` lists the chunks.
++-``random_offset`` px; ``near0``, ``near1``, ... (``near_draws`` of them) - ground truth + an offset of
+random sign and log-uniform size in ``near_offset`` px: the targets a second network pass starts from, which
+teach the precision near the answer. Scenes are split into train and test by scene. ``manifest.json`` lists
+the chunks.
 """
 
 from __future__ import annotations
@@ -21,8 +24,7 @@ from tpnet_gpu.config import CorrelationConfig
 from tpnet_gpu.scenes import Sensor, random_scene, render
 
 FORMAT = "tpnet-dataset"
-VERSION = 1
-VARIANTS = ("heuristic", "random")
+VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,18 @@ class DatasetSpec:
     random_offset: float = 2.0
     supersample: int = 2
     fat_zero: float = 1.0e4  # as the baseline: keeps noise-only frequencies from dominating the layers
+    # green only, as the baseline: the as-coded colour mix skews peaks at fractional shifts (issue 5 note)
+    colour_weights: tuple = (0.0, 0.0, 1.0)
+    near_offset: tuple = (0.005, 0.5)
+    near_draws: int = 2
+
+    def variants(self) -> tuple:
+        """Names of the target variants each chunk holds."""
+        return ("heuristic", "random") + tuple(f"near{i}" for i in range(self.near_draws))
+
+    def correlation(self) -> CorrelationConfig:
+        """The tile processor's correlation settings for the network layers."""
+        return CorrelationConfig(colour_weights=tuple(self.colour_weights), fat_zero=self.fat_zero)
 
     def split(self) -> list[str]:
         """'train' / 'test' per scene index, a seeded permutation (at least one test scene when >= 2)."""
@@ -70,10 +84,14 @@ def build_scene(index: int, spec: DatasetSpec, processor, baseline_processor,
     heuristic = estimate(processor_correlator(baseline_processor, frames), shape, baseline).disparity
     fallback = gt + rng.uniform(-spec.random_offset, spec.random_offset, shape)
     heuristic = np.where(np.isfinite(heuristic), heuristic, fallback)
-    random = gt + rng.uniform(-spec.random_offset, spec.random_offset, shape)
+    targets = {"heuristic": heuristic, "random": gt + rng.uniform(-spec.random_offset, spec.random_offset, shape)}
+    low, high = np.log(spec.near_offset[0]), np.log(spec.near_offset[1])
+    for i in range(spec.near_draws):
+        size = np.exp(rng.uniform(low, high, shape))
+        targets[f"near{i}"] = gt + np.where(rng.random(shape) < 0.5, -size, size)
     out = {"gt_disparity": gt.astype(np.float32), "gt_confidence": rendered.tile_confidence,
            "gt_spread": rendered.tile_spread, "scene": np.int32(index)}
-    for name, target in (("heuristic", heuristic), ("random", random)):
+    for name, target in targets.items():
         out[f"target_{name}"] = target.astype(np.float32)
         out[f"layers_{name}"] = _layers(processor, frames, target)
     return out
@@ -88,8 +106,9 @@ def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = Non
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    processor = TileProcessor(spec.height, spec.width, config=CorrelationConfig(fat_zero=spec.fat_zero), device=device)
-    baseline_processor = TileProcessor(spec.height, spec.width, config=BASELINE_CORRELATION, device=device)
+    processor = TileProcessor(spec.height, spec.width, config=spec.correlation(), device=device)
+    baseline_processor = (processor if spec.correlation() == BASELINE_CORRELATION else
+                          TileProcessor(spec.height, spec.width, config=BASELINE_CORRELATION, device=device))
     labels = spec.split()
     chunks = []
     for index in tqdm(range(spec.scenes), desc="scenes", disable=not progress):
@@ -99,7 +118,7 @@ def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = Non
             np.savez_compressed(tmp, **build_scene(index, spec, processor, baseline_processor))
             tmp.replace(path)
         chunks.append({"file": path.name, "split": labels[index], "scene": index})
-    manifest = {"format": FORMAT, "version": VERSION, "spec": asdict(spec), "variants": list(VARIANTS),
+    manifest = {"format": FORMAT, "version": VERSION, "spec": asdict(spec), "variants": list(spec.variants()),
                 "chunks": chunks}
     (folder / "manifest.json").write_text(json.dumps(manifest, indent=1))
     return folder
@@ -116,6 +135,9 @@ def load(folder, split: str) -> list[dict]:
     manifest = json.loads(manifest_path.read_text())
     if manifest.get("format") != FORMAT:
         raise ValueError(f"{manifest_path}: expected format {FORMAT!r}, got {manifest.get('format')!r}")
+    if manifest.get("version") != VERSION:
+        raise ValueError(f"{manifest_path}: expected data set version {VERSION}, got {manifest.get('version')!r} "
+                         "(rebuild it with `tpnet dataset`)")
     out = []
     for chunk in manifest["chunks"]:
         if chunk["split"] == split:

@@ -39,9 +39,16 @@ def tile_classes(gt: np.ndarray, confidence: np.ndarray, spread: np.ndarray, *, 
 GROSS_ERROR = 1.0  # px: errors beyond this are counted as outliers (wrong match, e.g. a periodic texture)
 
 
-def error_stats(estimate: np.ndarray, gt: np.ndarray, mask: np.ndarray) -> dict:
+def error_stats(estimate: np.ndarray, gt: np.ndarray, mask: np.ndarray, common: np.ndarray | None = None) -> dict:
     """RMSE, median |error|, coverage (share of the masked tiles with a finite estimate), the share of gross
-    errors (|error| > 1 px among the finite ones) and the RMSE of the rest (``rmse_inliers``)."""
+    errors (|error| > 1 px among the finite ones) and the RMSE of the rest (``rmse_inliers``). With ``common``
+    (a mask of tiles chosen the same for every method, e.g. :func:`reference_inliers`), also ``rmse_common``:
+    the RMSE over ``mask & common`` (NaN if the estimate misses one of them)."""
+    extra = {}
+    if common is not None:
+        sel = np.asarray(mask, dtype=bool) & np.asarray(common, dtype=bool)
+        err_c = np.asarray(estimate, dtype=np.float64)[sel] - np.asarray(gt, dtype=np.float64)[sel]
+        extra["rmse_common"] = float(np.sqrt(np.mean(err_c**2))) if err_c.size else float("nan")
     est = np.asarray(estimate, dtype=np.float64)[mask]
     ref = np.asarray(gt, dtype=np.float64)[mask]
     ok = np.isfinite(est)
@@ -54,7 +61,16 @@ def error_stats(estimate: np.ndarray, gt: np.ndarray, mask: np.ndarray) -> dict:
         "median_abs": float(np.median(np.abs(err))) if err.size else float("nan"),
         "gross": float(np.mean(np.abs(err) > GROSS_ERROR)) if err.size else float("nan"),
         "rmse_inliers": float(np.sqrt(np.mean(inliers**2))) if inliers.size else float("nan"),
+        **extra,
     }
+
+
+def reference_inliers(reference: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """Tiles where the reference method's error is finite and <= 1 px: the common tile set of the paper's
+    protocol (network.md §7: the heuristic within ``ofs_t`` of the ground truth), the same for every method."""
+    err = np.asarray(reference, dtype=np.float64) - np.asarray(gt, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(err) & (np.abs(err) <= GROSS_ERROR)
 
 
 def rmse_by_spread(estimate: np.ndarray, gt: np.ndarray, mask: np.ndarray, bins=SPREAD_BINS) -> list[dict]:

@@ -18,23 +18,27 @@ import torch
 
 from tpnet_gpu.baseline.estimate import BASELINE_CORRELATION
 from tpnet_gpu.baseline.strips import StripParams, centre_of_mass, combine_strips, pair_strips
-from tpnet_gpu.config import CorrelationConfig, TextureConfig
+from tpnet_gpu.config import TextureConfig
 from tpnet_gpu.processor import TileProcessor
-
-NETWORK_FAT_ZERO = 1.0e4  # the layers the shipped weights were trained on (tpnet_gpu.dataset.DatasetSpec)
 
 
 @dataclass(frozen=True)
 class PipelineConfig:
     """``sweep``: initial target disparities tried (px); ``refine_passes`` of centre-of-mass re-correlation;
     ``trust``: largest residual believed (px); ``min_strength``: weakest peak taken as a measurement (as the
-    baseline's refine_min_strength); ``textures``: make the RGBA texture."""
+    baseline's refine_min_strength); ``network_passes``: TPNET passes, each re-correlating at the previous
+    one's disparity; ``textures``: make the RGBA texture."""
 
     sweep: tuple = (0.0, 6.0, 12.0, 18.0, 24.0, 30.0, 36.0, 42.0)
     refine_passes: int = 2
     trust: float = 4.0
     min_strength: float = 0.1
+    network_passes: int = 2
     textures: bool = True
+
+    def __post_init__(self):
+        if not isinstance(self.network_passes, int) or self.network_passes < 1:
+            raise ValueError(f"network_passes: expected an int >= 1, got {self.network_passes!r}")
 
 
 @dataclass(frozen=True)
@@ -70,7 +74,7 @@ class Pipeline:
 
         self.config = config
         self.measure = TileProcessor(height, width, cfa=cfa, config=BASELINE_CORRELATION, device=device)
-        self.network_tp = TileProcessor(height, width, cfa=cfa, config=CorrelationConfig(fat_zero=NETWORK_FAT_ZERO),
+        self.network_tp = TileProcessor(height, width, cfa=cfa, config=infer.correlation(weights),
                                         textures=config.textures, texture_config=TextureConfig(), device=str(self.measure.device))
         self.device = self.measure.torch_device
         self.grid = (self.measure.tiles_y, self.measure.tiles_x)
@@ -110,10 +114,12 @@ class Pipeline:
             target.copy_(torch.where(step, target + residual, target))
         initial = torch.where(measured, target, torch.full_like(target, float("nan")))
         tp = self.network_tp
-        tp.prepare(frames, target)
-        tp.convert()
-        tp.correlate()
-        disparity = self._infer(self.model, tp.result.layers, target, grid=self.grid)
+        disparity = target
+        for _ in range(cfg.network_passes):
+            tp.prepare(frames, disparity)
+            tp.convert()
+            tp.correlate()
+            disparity = self._infer(self.model, tp.result.layers, disparity, grid=self.grid)
         disparity = torch.where(measured, disparity, torch.full_like(disparity, float("nan")))
         if cfg.textures:  # shift-corrected at the network's disparity
             tp.prepare(frames, torch.nan_to_num(disparity, nan=0.0))

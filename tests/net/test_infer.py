@@ -54,3 +54,21 @@ def test_missing_weights_and_bad_grid(tmp_path):
         infer.load(tmp_path / "none.pt")
     with pytest.raises(ValueError, match="grid: expected"):
         infer.infer(TPNet(), torch.zeros((48, 4, 9, 9)), torch.zeros((6, 8)))
+
+
+def test_correlation_settings_follow_the_recipe(tmp_path):
+    # the layers must be made as the weights' data set made them (oracle: the recipe's own numbers)
+    import json
+
+    from tpnet_gpu.dataset import DatasetSpec
+
+    weights = tmp_path / "w.pt"
+    assert infer.correlation(weights) == DatasetSpec().correlation()  # no recipe: today's data set
+    weights.with_suffix(".json").write_text(json.dumps({"dataset_spec": {"fat_zero": 30.0}}))
+    old = infer.correlation(weights)  # data set version 1: no colour weights = the processor's default mix
+    assert old.colour_weights is None and old.fat_zero == 30.0
+    weights.with_suffix(".json").write_text(json.dumps({"dataset_spec": {"fat_zero": 5.0, "colour_weights": [0, 1, 0]}}))
+    assert infer.correlation(weights).colour_weights == (0, 1, 0)
+    shipped = infer.recipe()["dataset_spec"]
+    assert infer.correlation().colour_weights == tuple(shipped.get("colour_weights") or ()) or \
+        infer.correlation().colour_weights is None
