@@ -14,8 +14,7 @@ the next starts: a full-frame CLT is ~1 GB):
 * **taichi**: ``TileProcessor(backend="taichi")`` (kernels/taichi_*.py, the same buffers and outputs), then the
   same network. Taichi fixes its CPU thread count at ``ti.init``, so each count of ``--taichi-threads`` (default
   1 and 2) runs in its own process (``TPNET_TAICHI_THREADS``); on CUDA one process runs it on the GPU. Its
-  outputs are compared with a Warp processor's on the same frame in that process. Its texture stage would be
-  Warp's kernels, so it has no texture row.
+  outputs are compared with a Warp processor's on the same frame in that process.
 
 Rows: convert, correlate, texture (Warp only), network stage 1 (tile inputs + the per-tile MLP), network stage 2
 (5x5 cluster convolution + the rest), network whole frame (``forward_frame``), TP whole frame (prepare + convert +
@@ -75,14 +74,13 @@ TARGET_CPU_RATIO = 2.0
 SOAK_EVERY = 50  # frames between RSS samples
 
 IMPLEMENTATIONS = ("warp", "numpy", "torch")
-TAICHI_ROWS = ("convert", "correlate", "TP whole frame", "TP+network whole frame")
 
 
 # Table rows: (name, whole frame?). Each implementation maps the names it runs to a callable ``fn()``.
 ROWS = (
     ("convert", False),
     ("correlate", False),
-    ("texture", False),  # Warp only: no twin (the float64 reference is the oracle)
+    ("texture", False),  # Warp and Taichi only: no twin (the float64 reference is the oracle)
     ("network stage 1", False),  # the network rows: one PyTorch model, listed under warp
     ("network stage 2", False),
     ("network whole frame", True),
@@ -382,7 +380,7 @@ def run_taichi(args, cfa, device, frames_t, target, net) -> dict:
 
     tdev = target.device
     start = time.perf_counter()
-    tp = TileProcessor(args.height, args.width, cfa=cfa, device=str(device), backend="taichi")
+    tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, device=str(device), backend="taichi")
     setup_ms = 1e3 * (time.perf_counter() - start)
 
     def sync() -> None:
@@ -405,7 +403,7 @@ def run_taichi(args, cfa, device, frames_t, target, net) -> dict:
         tp_whole()
         net.forward_frame(layers, target)
 
-    stages = {"convert": tp.convert, "correlate": tp.correlate, "TP whole frame": tp_whole,
+    stages = {"convert": tp.convert, "correlate": tp.correlate, "texture": tp.texture, "TP whole frame": tp_whole,
               "TP+network whole frame": tp_network}
     label = f"taichi ({taichi_setup.current_arch()}, {taichi_setup.threads()} CPU threads)"
     with torch.inference_mode():

@@ -88,7 +88,7 @@ class TileProcessor:
         device: Warp device ("cpu", "cuda", "cuda:0"); default cuda when present.
         backend: kernel language, "warp" (default) or "taichi" (``kernels/taichi_*.py``: the same math, inputs
             and outputs; on the CPU it spreads the tiles over every core, see ``tpnet_gpu.taichi_setup`` for the
-            thread count and the offline cache). The texture stage runs Warp's kernels on both backends.
+            thread count and the offline cache).
     """
 
     def __init__(
@@ -275,6 +275,13 @@ class TileProcessor:
             "dtt2e": table(np.stack([0.5 * tables.dtt2e_matrix(sine) for sine in (False, True)])),
             "unfold_index": table(np.stack([np.abs(u).argmax(axis=1) for u in unfold]), torch.int32),
             "unfold_sign": table(np.stack([u.sum(axis=1) for u in unfold])),
+            **({} if not self.textures else {
+                "pix": t(self._tex_pix), "cmp": t(self._tex_cmp), "weights": t(self._tex_weights),
+                "canvas": self._canvas_t, "tex_lpf": t(self._tex_lpf), "inv_cos": t(self._inv_cos),
+                "inv_sin": t(self._inv_sin), "tex_weights_c": t(self._tex_weights_c),
+                "channel_of_colour": t(self._channel_of_colour),
+                "window2": table(np.outer(tables.half_sine(np.arange(16)) ** 2, tables.half_sine(np.arange(16)) ** 2)),
+            }),
         }
 
     # --- inputs --------------------------------------------------------------------------------------------
@@ -467,7 +474,7 @@ class TileProcessor:
         """Stage 3: CLT tiles -> RGBA texture image (needs ``textures=True`` at construction)."""
         if not self.textures:
             raise RuntimeError("texture: this processor was built without textures=True")
-        with self._launching("warp"):  # Warp's texture kernels on both backends (the same buffers)
+        with self._launching():
             self._launch_texture()
 
     def _launch_convert(self) -> None:
@@ -530,6 +537,21 @@ class TileProcessor:
 
     def _launch_texture(self) -> None:
         tc, d = self.texture_config, self.device
+        if self._taichi is not None:
+            from tpnet_gpu.kernels import taichi_texture  # noqa: PLC0415
+
+            v = self._taichi
+            taichi_texture.clear_canvas(v["canvas"])
+            taichi_texture.texture_imclt(v["clt"], v["finite"], self.cams, self.colours, v["tex_lpf"], v["inv_cos"],
+                                         v["inv_sin"], v["pix"])
+            taichi_texture.texture_demosaic(v["pix"], v["finite"], self.cams, self.colours, tc.scale_shot,
+                                            tc.min_shot, v["window2"], v["cmp"])
+            taichi_texture.texture_combine(
+                v["pix"], v["cmp"], v["finite"], self.tiles_x, self.tiles_y, self.cams, self.colours, v["offsets"],
+                v["tex_weights_c"], v["channel_of_colour"], tc.diff_sigma, tables.TEXTURE_WEIGHT_FLOOR,
+                int(tc.dust_remove), tc.output_gain, v["window2"], v["weights"], v["canvas"],
+            )
+            return
         per_pixel = (self.tiles * self.cams * self.colours, 16, 16)
         wp.launch(texture.clear_canvas, dim=self._canvas.shape, outputs=[self._canvas], device=d)
         wp.launch_tiled(
