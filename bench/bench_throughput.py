@@ -16,7 +16,7 @@ the next starts: a full-frame CLT is ~1 GB):
   1 and 2) runs in its own process (``TPNET_TAICHI_THREADS``); on CUDA one process runs it on the GPU. Its
   outputs are compared with a Warp processor's on the same frame in that process.
 
-Rows: convert, correlate, texture (Warp only), network stage 1 (tile inputs + the per-tile MLP), network stage 2
+Rows: convert, correlate, texture (Warp and Taichi), network stage 1 (tile inputs + the per-tile MLP), network stage 2
 (5x5 cluster convolution + the rest), network whole frame (``forward_frame``), TP whole frame (prepare + convert +
 correlate for Warp; convert + correlate for the twins, which take the processor's tile centres) and TP+network
 whole frame (the TP whole frame, then the network on its layers; the twins combine their correlations into layers
