@@ -219,7 +219,7 @@ def texture_combine(
             ty = tile // tiles_x
             tx = tile - ty * tiles_x
             # Positions outside the frame count as contributing: only the region's edges inside the frame fade.
-            # (if statements, not conditional expressions: Taichi evaluates both sides of those.)
+            # Neighbour reads guarded by if statements (never read off the tile grid).
             north = 1
             if ty > 0:
                 north = ti.cast(finite[tile - tiles_x] != 0, ti.i32)
