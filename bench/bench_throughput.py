@@ -1,7 +1,8 @@
 """Throughput benchmark: the tile processor and TPNET per stage and per whole quad frame.
 
     python bench/bench_throughput.py [--device cpu|cuda] [--height 1936 --width 2592] [--repeat 3] [--threads N]
-                                     [--json out/bench_throughput.json] [--soak N]
+                                     [--taichi-threads 1,2 | --no-taichi] [--json out/bench_throughput.json]
+                                     [--soak N]
 
 One quad frame (4 cameras, random 12-bit raw values, seeded), every tile at one target disparity. Three
 implementations of the same tile-processor math, run one after the other (each one's outputs are freed before
@@ -9,9 +10,13 @@ the next starts: a full-frame CLT is ~1 GB):
 
 * **warp**: ``TileProcessor`` (the Warp kernels), then TPNET (``tpnet_gpu.net.model.TPNet``) on its layers;
 * **numpy**: the vectorised float32 NumPy twin (bench/numpy_tp.py), CPU runs only;
-* **torch**: the plain-PyTorch-ops twin (bench/torch_tp.py) on the processor's torch device.
+* **torch**: the plain-PyTorch-ops twin (bench/torch_tp.py) on the processor's torch device;
+* **taichi**: ``TileProcessor(backend="taichi")`` (kernels/taichi_*.py, the same buffers and outputs), then the
+  same network. Taichi fixes its CPU thread count at ``ti.init``, so each count of ``--taichi-threads`` (default
+  1 and 2) runs in its own process (``TPNET_TAICHI_THREADS``); on CUDA one process runs it on the GPU. Its
+  outputs are compared with a Warp processor's on the same frame in that process.
 
-Rows: convert, correlate, texture (Warp only), network stage 1 (tile inputs + the per-tile MLP), network stage 2
+Rows: convert, correlate, texture (Warp and Taichi), network stage 1 (tile inputs + the per-tile MLP), network stage 2
 (5x5 cluster convolution + the rest), network whole frame (``forward_frame``), TP whole frame (prepare + convert +
 correlate for Warp; convert + correlate for the twins, which take the processor's tile centres) and TP+network
 whole frame (the TP whole frame, then the network on its layers; the twins combine their correlations into layers
@@ -75,7 +80,7 @@ IMPLEMENTATIONS = ("warp", "numpy", "torch")
 ROWS = (
     ("convert", False),
     ("correlate", False),
-    ("texture", False),  # Warp only: no twin (the float64 reference is the oracle)
+    ("texture", False),  # Warp and Taichi only: no twin (the float64 reference is the oracle)
     ("network stage 1", False),  # the network rows: one PyTorch model, listed under warp
     ("network stage 2", False),
     ("network whole frame", True),
@@ -367,6 +372,85 @@ def run_twin(impl: str, args, cfa, frames, frames_t, target, net, reference: dic
     return warmup, runs, agree
 
 
+# --- Taichi backend (one process per CPU thread count) ------------------------------------------------------
+def run_taichi(args, cfa, device, frames_t, target, net) -> dict:
+    """The Taichi processor's stages and the network on its layers, in this process (Taichi's thread count is
+    that of this process); then its outputs against a Warp processor's on the same frame."""
+    from tpnet_gpu import taichi_setup  # noqa: PLC0415 - imported by the Taichi worker only
+
+    tdev = target.device
+    start = time.perf_counter()
+    tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, device=str(device), backend="taichi")
+    setup_ms = 1e3 * (time.perf_counter() - start)
+
+    def sync() -> None:
+        if tdev.type == "cuda":
+            taichi_setup.ti.sync()
+            torch.cuda.synchronize(tdev)
+
+    start = time.perf_counter()
+    result = tp.process(frames_t, args.disparity)  # compiles the kernels or loads them from the offline cache
+    sync()
+    first_process_ms = 1e3 * (time.perf_counter() - start)
+    layers = result.layers.view(tp.tiles_y, tp.tiles_x, 4, 9, 9)
+
+    def tp_whole() -> None:
+        tp.prepare(frames_t, args.disparity)
+        tp.convert()
+        tp.correlate()
+
+    def tp_network() -> None:
+        tp_whole()
+        net.forward_frame(layers, target)
+
+    stages = {"convert": tp.convert, "correlate": tp.correlate, "texture": tp.texture, "TP whole frame": tp_whole,
+              "TP+network whole frame": tp_network}
+    label = f"taichi ({taichi_setup.current_arch()}, {taichi_setup.threads()} CPU threads)"
+    with torch.inference_mode():
+        warmup, runs = run_stages(label, stages, sync, args.repeat)
+    tp_whole()
+    sync()
+    log(f"{label}: comparing with warp ...")
+    mine = {name: getattr(result, name).clone() for name in ("corr", "layers")}
+    del tp, result, layers
+    gc.collect()
+    warp_tp = TileProcessor(args.height, args.width, cfa=cfa, device=str(device), graph=False)
+    reference = warp_tp.process(frames_t, args.disparity)
+    wp.synchronize_device(warp_tp.device)
+    agree = {name: agreement(mine[name], getattr(reference, name)) for name in mine}
+    return {"warmup": warmup, "runs": runs, "agreement": agree,
+            "setup": {"taichi_setup_ms": setup_ms, "taichi_first_process_ms": first_process_ms,
+                      "threads": taichi_setup.threads(), "arch": taichi_setup.current_arch()}}
+
+
+def taichi_columns(args, is_cuda: bool) -> list[tuple[str, int | None]]:
+    """(column name, CPU thread count or None) of the Taichi runs this bench makes."""
+    if args.no_taichi:
+        return []
+    if is_cuda:
+        return [("taichi-cuda", None)]
+    return [(f"taichi-{n}t", n) for n in args.taichi_threads]
+
+
+def spawn_taichi(argv: list[str], threads: int | None) -> dict:
+    """This script again in a fresh process, as a Taichi worker with ``threads`` CPU threads; returns its report."""
+    import json  # noqa: PLC0415
+    import subprocess  # noqa: PLC0415
+    import tempfile  # noqa: PLC0415
+
+    with tempfile.TemporaryDirectory() as folder:
+        out = Path(folder) / "taichi.json"
+        env = dict(os.environ)
+        if threads is not None:
+            env["TPNET_TAICHI_THREADS"] = str(threads)
+        cmd = [sys.executable, str(Path(__file__).resolve()), *argv, "--soak", "0", "--json", "",
+               "--taichi-worker", str(out)]
+        done = subprocess.run(cmd, env=env)
+        if done.returncode != 0:
+            raise SystemExit(f"taichi worker ({threads} threads) failed with exit status {done.returncode}")
+        return json.loads(out.read_text())
+
+
 # --- main -------------------------------------------------------------------------------------------------------
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -380,7 +464,18 @@ def main(argv=None) -> dict:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--soak", type=int, default=0, help="frames to stream for the RSS soak (default 0: none)")
     parser.add_argument("--json", default="out/bench_throughput.json", help="output JSON path ('' to skip)")
+    parser.add_argument("--taichi-threads", default="1,2",
+                        help="Taichi CPU thread counts, one process each (default 1,2; CPU runs only)")
+    parser.add_argument("--no-taichi", action="store_true", help="skip the Taichi backend")
+    parser.add_argument("--taichi-worker", default=None, help=argparse.SUPPRESS)  # internal: JSON path of a worker
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
+    try:
+        args.taichi_threads = [int(n) for n in args.taichi_threads.split(",") if n.strip()]
+    except ValueError:
+        parser.error(f"--taichi-threads: expected comma-separated thread counts, got {args.taichi_threads!r}")
+    if any(n < 1 for n in args.taichi_threads):
+        parser.error(f"--taichi-threads: expected thread counts >= 1, got {args.taichi_threads}")
     if args.repeat < 1:
         parser.error("--repeat: expected at least 1")
     if args.soak < 0:
@@ -409,6 +504,12 @@ def main(argv=None) -> dict:
     frames_t = torch.from_numpy(frames).to(tdev)  # float32, contiguous: the processor reads it in place
     tiles_y, tiles_x = args.height // 8, args.width // 8
     target = torch.full((tiles_y, tiles_x), args.disparity, dtype=torch.float32, device=tdev)
+    if args.taichi_worker:  # a Taichi worker process: only the Taichi rows, to a JSON file for the parent
+        import json  # noqa: PLC0415
+
+        report = run_taichi(args, cfa, device, frames_t, target, net)
+        Path(args.taichi_worker).write_text(json.dumps(report))
+        return report
     log(f"{args.width}x{args.height}, {cams} cameras, {tiles_y * tiles_x} tiles on {device} ({device_name(device)}); "
         f"torch threads {torch.get_num_threads()}")
 
@@ -426,6 +527,14 @@ def main(argv=None) -> dict:
     network_split_diff, setup = reference["split_diff"], reference["setup"]
     del reference
     gc.collect()
+    columns = taichi_columns(args, is_cuda)
+    taichi_setups = {}
+    for column, threads in columns:
+        log(f"{column}: in a fresh process ...")
+        worker = spawn_taichi(argv, threads)
+        warmups[column], runs[column], agree[column] = worker["warmup"], worker["runs"], worker["agreement"]
+        taichi_setups[column] = worker["setup"]
+    impls = IMPLEMENTATIONS + tuple(column for column, _ in columns)
     log("graph replay ...")
     graph = measure_graph_replay(args, cfa, device, frames_t, target, net)
 
@@ -433,13 +542,13 @@ def main(argv=None) -> dict:
     table = []
     for name, whole_frame in ROWS:
         entry = {"name": name, "whole_frame": whole_frame}
-        for impl in IMPLEMENTATIONS:
+        for impl in impls:
             entry[f"{impl}_ms"] = summary(runs[impl][name]) if name in runs.get(impl, {}) else None
             entry[f"{impl}_warmup_ms"] = warmups.get(impl, {}).get(name)
-        for impl in ("numpy", "torch"):
+        for impl in impls[1:]:
             peer = entry[f"{impl}_ms"]
             entry[f"ratio_{impl}_over_warp"] = peer["median"] / entry["warp_ms"]["median"] if peer else None
-        entry["fps"] = {impl: 1e3 / entry[f"{impl}_ms"]["median"] for impl in IMPLEMENTATIONS
+        entry["fps"] = {impl: 1e3 / entry[f"{impl}_ms"]["median"] for impl in impls
                         if whole_frame and entry[f"{impl}_ms"]} or None
         table.append(entry)
     by_name = {e["name"]: e for e in table}
@@ -487,9 +596,15 @@ def main(argv=None) -> dict:
             "twins": "numpy/torch take the processor's tile centres (no prepare stage); the torch correlate row "
                      "includes the layer combination (as the processor's correlate stage), the numpy one does not; "
                      "their TP+network rows feed torch_layers of their own correlations to the network",
+            "taichi": "TileProcessor(backend='taichi') in a fresh process per column (taichi-Nt: N CPU threads, "
+                      "TPNET_TAICHI_THREADS; taichi-cuda: the GPU); its warm-up includes loading the kernels from "
+                      "Taichi's offline cache (or compiling them on a cold cache); agreement: corr and layers "
+                      "against a Warp processor on the same frame",
+            "taichi_setup": taichi_setups,
             **setup,
         },
         "stages": table,
+        "columns": list(impls),
         "agreement": {**agree, "tolerance": f"elements_over_tol: |twin - warp| > {AGREEMENT_TOL:g} max |warp|",
                       "layers_note": "the pair combination of the layers is discontinuous at 0 (sqrt((a + o)(b + o))"
                                      " - o only where a > 0 and b > 0): pair values ~1e-8 whose sign differs by "
@@ -537,10 +652,13 @@ def print_report(report: dict) -> None:
           f"{f['pairs']} pairs")
     print(f"device: {d['warp_device']} = {d['name']}; torch threads {report['machine']['torch_threads']}; "
           f"median of {t['repeat']} back-to-back runs after a warm-up call, per row")
-    rows = [(s["name"], ms(s["warp_ms"]), ms(s["numpy_ms"]), ms(s["torch_ms"]), ratio(s["ratio_numpy_over_warp"]),
-             ratio(s["ratio_torch_over_warp"]), f"{s['fps']['warp']:.2f}" if s["fps"] else "-")
+    taichi = [c for c in report["columns"] if c.startswith("taichi")]
+    rows = [(s["name"], ms(s["warp_ms"]), ms(s["numpy_ms"]), ms(s["torch_ms"]), *(ms(s[f"{c}_ms"]) for c in taichi),
+             ratio(s["ratio_numpy_over_warp"]), ratio(s["ratio_torch_over_warp"]),
+             *(ratio(s[f"ratio_{c}_over_warp"]) for c in taichi), f"{s['fps']['warp']:.2f}" if s["fps"] else "-")
             for s in report["stages"]]
-    header = ("stage", "warp ms", "numpy ms", "torch ms", "numpy/warp", "torch/warp", "fps (warp)")
+    header = ("stage", "warp ms", "numpy ms", "torch ms", *(f"{c} ms" for c in taichi), "numpy/warp", "torch/warp",
+              *(f"{c}/warp" for c in taichi), "fps (warp)")
     print("\n".join(_fmt_table(header, rows)))
     print("network rows: the same PyTorch TPNet for every path, on the processor's device (listed under warp); "
           "whole-frame twins: their TP, then torch_layers + that network")

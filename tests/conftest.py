@@ -1,4 +1,5 @@
-"""Shared fixtures: the Warp devices to test on (CPU always; CUDA when present, else skipped with a reason)."""
+"""Shared fixtures: the Warp devices to test on (CPU always; CUDA when present, else skipped with a reason) and the
+kernel backends (Warp and Taichi: every parametrised test runs the same oracle comparison on both)."""
 
 import pytest
 
@@ -16,4 +17,9 @@ def _cuda_available() -> bool:
 def device(request):
     if request.param == "cuda" and not _cuda_available():
         pytest.skip("no CUDA device on this machine")
+    return request.param
+
+
+@pytest.fixture(params=["warp", "taichi"])
+def backend(request):
     return request.param

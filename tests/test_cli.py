@@ -26,6 +26,10 @@ def test_process_scene_folder_and_bad_inputs(tmp_path, capsys):
     assert main(["process", str(tmp_path / "s"), "--out", str(tmp_path / "o"), "--device", "cpu"]) == 0
     disparity = tifffile.imread(tmp_path / "o" / "disparity.tif")
     assert disparity.shape == (8, 12) and np.isfinite(disparity).any()
+    # The Taichi backend gives the same disparities (same math; float32 rounding differs).
+    assert main(["process", str(tmp_path / "s"), "--out", str(tmp_path / "t"), "--device", "cpu",
+                 "--backend", "taichi"]) == 0
+    np.testing.assert_allclose(tifffile.imread(tmp_path / "t" / "disparity.tif"), disparity, atol=1e-3)
     assert (tmp_path / "o" / "texture.png").exists()
     capsys.readouterr()
     assert main(["process", str(tmp_path / "a.dng"), str(tmp_path / "b.dng")]) == 2
@@ -44,3 +48,10 @@ def test_bench_wrapper_runs_a_script(tmp_path, capsys):
     json_path = tmp_path / "tp.json"
     assert main(["bench", "tp", "--height", "32", "--width", "48", "--repeat", "1", "--json", str(json_path)]) == 0
     assert "convert" in capsys.readouterr().out and json_path.exists()
+
+
+def test_backend_choices_are_the_processors():
+    from tpnet_gpu import cli
+    from tpnet_gpu.processor import BACKENDS
+
+    assert cli.BACKENDS == BACKENDS

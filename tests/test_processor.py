@@ -1,6 +1,7 @@
 """TileProcessor host class: zero-copy hand-off to torch, owned buffers, input handling and bad input.
 Oracles: the golden reference (values) and Warp's own buffer pointers (zero-copy)."""
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -22,8 +23,8 @@ def frames():
     return np.random.default_rng(30).uniform(0, 4000, size=(4, H, W)).astype(np.float32)
 
 
-def test_results_share_the_warp_buffers(device, frames):
-    tp = TileProcessor(H, W, device=device)
+def test_results_share_the_warp_buffers(device, backend, frames):
+    tp = TileProcessor(H, W, device=device, backend=backend)
     out = tp.process(frames, 1.0)
     assert out.corr.data_ptr() == tp._corr.ptr and out.clt.data_ptr() == tp._clt.ptr
     assert out.layers.data_ptr() == tp._layers.ptr and out.valid.data_ptr() == tp._valid.ptr
@@ -32,24 +33,24 @@ def test_results_share_the_warp_buffers(device, frames):
     assert again.corr.data_ptr() == out.corr.data_ptr()
 
 
-def test_float32_torch_input_is_read_in_place(device, frames):
-    tp = TileProcessor(H, W, device=device)
+def test_float32_torch_input_is_read_in_place(device, backend, frames):
+    tp = TileProcessor(H, W, device=device, backend=backend)
     t = torch.from_numpy(frames).to(tp.torch_device)
     assert tp._frames_array(t).ptr == t.data_ptr()  # zero-copy view, not the staging buffer
     assert tp._frames_array(frames.astype(np.uint16)).ptr == tp._frames.ptr  # other dtypes: staged
 
 
 @pytest.mark.parametrize("dtype", [np.uint16, np.float64, np.int32])
-def test_any_real_dtype_gives_the_same_result(device, frames, dtype):
-    tp = TileProcessor(H, W, device=device)
+def test_any_real_dtype_gives_the_same_result(device, backend, frames, dtype):
+    tp = TileProcessor(H, W, device=device, backend=backend)
     data = np.round(frames).astype(dtype)
     out = tp.process(data, 0.5)
     want = reference_clt(np.round(frames), out.centres.cpu().numpy(), "GRBG")
     assert relative_error(out.clt, want) <= 1e-5
 
 
-def test_active_mask_skips_tiles(device, frames):
-    tp = TileProcessor(H, W, config=CorrelationConfig(fat_zero=0.0), device=device)
+def test_active_mask_skips_tiles(device, backend, frames):
+    tp = TileProcessor(H, W, config=CorrelationConfig(fat_zero=0.0), device=device, backend=backend)
     active = np.zeros((H // 8, W // 8), dtype=bool)
     active[1:3, 1:4] = True
     out = tp.process(frames, 0.0, active=active)
@@ -58,9 +59,10 @@ def test_active_mask_skips_tiles(device, frames):
     np.testing.assert_array_equal(out.valid.cpu().numpy().reshape(active.shape), active)
 
 
-def test_two_threads_do_not_crash(frames):
-    # Warp CPU tile kernels abort when launched concurrently (platform.md §1); the processor serialises them.
-    tps = [TileProcessor(H, W, device="cpu") for _ in range(2)]
+def test_two_threads_do_not_crash(frames, backend):
+    # Warp CPU tile kernels abort when launched concurrently (platform.md §1); Taichi has one runtime per
+    # process. The processor serialises the launches of either backend.
+    tps = [TileProcessor(H, W, device="cpu", backend=backend) for _ in range(2)]
     errors = []
 
     def work(tp):
@@ -76,22 +78,24 @@ def test_two_threads_do_not_crash(frames):
     assert not errors
 
 
-def test_off_image_windows_never_read_out_of_bounds_in_debug_mode(tmp_path):
-    # Warp's debug mode turns on array bounds checks; an out-of-bounds read aborts the process.
+def test_off_image_windows_never_read_out_of_bounds_in_debug_mode(tmp_path, backend):
+    # Warp's debug mode turns on array bounds checks (an out-of-bounds read aborts the process); Taichi's
+    # (TPNET_TAICHI_DEBUG=1) checks every ndarray access and raises.
     script = tmp_path / "debug_run.py"
-    script.write_text(textwrap.dedent("""
+    script.write_text(textwrap.dedent(f"""
         import numpy as np, warp as wp
         wp.config.mode = "debug"
         from tpnet_gpu.processor import TileProcessor
         rng = np.random.default_rng(0)
-        tp = TileProcessor(32, 48, device="cpu")
+        tp = TileProcessor(32, 48, device="cpu", backend="{backend}")
         d = rng.uniform(-200, 200, size=(4, 6)).astype(np.float32)
         d[0, 0] = 1e9
         out = tp.process(rng.uniform(0, 100, size=(4, 32, 48)).astype(np.float32), d)
         assert np.isfinite(out.corr.numpy()).all()
         print("debug-ok", int(out.valid.numpy().sum()))
     """))
-    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600)
+    env = {**os.environ, "TPNET_TAICHI_DEBUG": "1"}
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, env=env)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "debug-ok" in done.stdout
 
@@ -108,6 +112,9 @@ def test_off_image_windows_never_read_out_of_bounds_in_debug_mode(tmp_path):
         (dict(kernels=np.zeros((4, 3, 4, 8))), ValueError, r"kernels: expected shape \(cams=4, \[rows, cols,\] colours=3"),
         (dict(config=CorrelationConfig(colour_weights=(1.0,))), ValueError, "colour_weights: expected 3 values, got 1"),
         (dict(config=CorrelationConfig(fat_zero=-1.0)), ValueError, "fat_zero >= 0 and sigmas > 0 expected"),
+        (dict(backend="numba"), ValueError, r"backend: expected one of \('warp', 'taichi'\), got 'numba'"),
+        (dict(backend="taichi", graph=True), ValueError, "graph: graph capture records Warp launches; it needs "
+                                                          "backend='warp', got backend='taichi'"),
     ],
 )
 def test_bad_construction(kwargs, error, match):
@@ -117,8 +124,8 @@ def test_bad_construction(kwargs, error, match):
         TileProcessor(args.pop("height"), args.pop("width"), **args)
 
 
-def test_bad_frames_and_tasks(frames):
-    tp = TileProcessor(H, W, device="cpu")
+def test_bad_frames_and_tasks(frames, backend):
+    tp = TileProcessor(H, W, device="cpu", backend=backend)
     with pytest.raises(ValueError, match=r"frames: expected shape \(4, 32, 48\) \(cams, height, width\), got \(3, 32, 48\)"):
         tp.process(frames[:3], 0.0)
     with pytest.raises(ValueError, match=r"frames: expected shape \(4, 32, 48\).*got \(4, 48, 32\)"):

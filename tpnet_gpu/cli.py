@@ -11,7 +11,8 @@ import time
 def _cmd_demo(args: argparse.Namespace) -> int:
     from tpnet_gpu.demo import run_demo
 
-    print(run_demo(args.out, width=args.width, height=args.height, seed=args.seed, device=args.device)["text"])
+    print(run_demo(args.out, width=args.width, height=args.height, seed=args.seed, device=args.device,
+                   backend=args.backend)["text"])
     return 0
 
 
@@ -32,7 +33,7 @@ def _cmd_process(args: argparse.Namespace) -> int:
     if cams != 4:
         raise ValueError(f"inputs: expected 4 cameras, got {cams}")
     start = time.perf_counter()
-    result = Pipeline(height, width, cfa=cfa, device=args.device).process(frames)
+    result = Pipeline(height, width, cfa=cfa, device=args.device, backend=args.backend).process(frames)
     seconds = time.perf_counter() - start
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -117,6 +118,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 BENCHES = ("tp", "accuracy", "network", "throughput")
+BACKENDS = ("warp", "taichi")  # TileProcessor's backends (not imported here: the CLI starts without Warp)
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -144,6 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--height", type=int, default=480, help="frame height, pixels (multiple of 8)")
     demo.add_argument("--seed", type=int, default=0, help="seed of the scene and the noise")
     demo.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
+    demo.add_argument("--backend", choices=BACKENDS, default="warp", help="tile-processor kernels (default warp)")
     demo.set_defaults(func=_cmd_demo)
 
     proc = sub.add_parser("process", help="disparity, confidence and texture of a quad frame (scene folder or 4 raws)")
@@ -151,6 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
     proc.add_argument("--out", default="out/process", help="output folder")
     proc.add_argument("--cfa", default=None, help="Bayer pattern of TIFF inputs (e.g. GRBG)")
     proc.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
+    proc.add_argument("--backend", choices=BACKENDS, default="warp", help="tile-processor kernels (default warp)")
     proc.set_defaults(func=_cmd_process)
 
     rend = sub.add_parser("render", help="render a synthetic quad-camera scene folder (DNGs + ground truth)")

@@ -41,7 +41,8 @@ def correlation_sheet(corr: np.ndarray, tiles: list[int], zoom: int = 6) -> np.n
     return (np.concatenate(rows, axis=0) * 255).astype(np.uint8)
 
 
-def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int = 0, device: str | None = None) -> dict:
+def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int = 0, device: str | None = None,
+             backend: str = "warp") -> dict:
     """Render the demo scene, run the pipeline, write the pictures and the report; returns the report."""
     from tpnet_gpu.camera import Rig  # noqa: PLC0415 - heavy imports on use
     from tpnet_gpu.pipeline import Pipeline
@@ -55,7 +56,7 @@ def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int =
     t_render = time.perf_counter() - start
     frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
     start = time.perf_counter()
-    pipeline = Pipeline(height, width, device=device)
+    pipeline = Pipeline(height, width, device=device, backend=backend)
     t_setup = time.perf_counter() - start
     pipeline.process(frames)  # first frame compiles / loads the kernels
     start = time.perf_counter()

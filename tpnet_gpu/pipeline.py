@@ -66,16 +66,19 @@ class Pipeline:
     Args:
         weights: TPNET weights (default: the shipped ones).
         device: "cpu" or "cuda" (default cuda when present).
+        backend: kernel language of the tile processors, "warp" or "taichi" (``TileProcessor``).
     """
 
     def __init__(self, height: int, width: int, *, cfa: str = "GRBG", weights=None, device: str | None = None,
-                 config: PipelineConfig = PipelineConfig()):
+                 config: PipelineConfig = PipelineConfig(), backend: str = "warp"):
         from tpnet_gpu.net import infer  # noqa: PLC0415 - torch model loading on use
 
         self.config = config
-        self.measure = TileProcessor(height, width, cfa=cfa, config=BASELINE_CORRELATION, device=device)
+        self.measure = TileProcessor(height, width, cfa=cfa, config=BASELINE_CORRELATION, device=device,
+                                     backend=backend)
         self.network_tp = TileProcessor(height, width, cfa=cfa, config=infer.correlation(weights),
-                                        textures=config.textures, texture_config=TextureConfig(), device=str(self.measure.device))
+                                        textures=config.textures, texture_config=TextureConfig(),
+                                        device=str(self.measure.device), backend=backend)
         self.device = self.measure.torch_device
         self.grid = (self.measure.tiles_y, self.measure.tiles_x)
         self.model = infer.load(weights, device=self.device)

@@ -1,8 +1,10 @@
-"""The tile processor's host class: owns every device buffer and launches the Warp kernels.
+"""The tile processor's host class: owns every device buffer and launches the Warp or the Taichi kernels.
 
-Built once for (image size, cameras, pairs, colours, kernels, device); ``process`` only copies or maps the
-inputs and launches. Results are torch tensors that share memory with the Warp buffers (``wp.to_torch``) on
-the processor's device: they are overwritten by the next call (clone them to keep a frame's results).
+Built once for (image size, cameras, pairs, colours, kernels, device, backend); ``process`` only copies or maps
+the inputs and launches. Results are torch tensors that share memory with the Warp buffers (``wp.to_torch``) on
+the processor's device: they are overwritten by the next call (clone them to keep a frame's results). The Taichi
+backend launches its kernels on the same buffers, through torch views (``ti.types.ndarray``, zero-copy), so
+results, layouts and tables are the same for both backends.
 """
 
 from __future__ import annotations
@@ -22,7 +24,10 @@ from tpnet_gpu.warp_setup import default_device, init_warp
 
 # Warp's CPU tile kernels share one scratch arena: two concurrent launches abort the process (platform.md §1).
 _CPU_LAUNCH_LOCK = threading.Lock()
+# Taichi has one runtime per process (arch, threads, compiled kernels): its launches are serialised too.
+_TAICHI_LOCK = threading.Lock()
 CUDA_BLOCK_DIM = 64
+BACKENDS = ("warp", "taichi")
 
 
 @dataclass(frozen=True)
@@ -79,8 +84,11 @@ class TileProcessor:
         texture_config: texture parameters.
         graph: record ``process``'s launches once as a Warp graph (a CUDA graph on the GPU) and replay it
             for every later frame; inputs are then always staged into the processor's buffers. Default: on
-            CUDA only (plain launches on the CPU).
+            CUDA with the Warp backend only (plain launches on the CPU). Warp only.
         device: Warp device ("cpu", "cuda", "cuda:0"); default cuda when present.
+        backend: kernel language, "warp" (default) or "taichi" (``kernels/taichi_*.py``: the same math, inputs
+            and outputs; on the CPU it spreads the tiles over every core, see ``tpnet_gpu.taichi_setup`` for the
+            thread count and the offline cache).
     """
 
     def __init__(
@@ -97,6 +105,7 @@ class TileProcessor:
         texture_config: TextureConfig = TextureConfig(),
         graph: bool | None = None,
         device: str | None = None,
+        backend: str = "warp",
     ):
         for name, value in (("height", height), ("width", width)):
             if not isinstance(value, (int, np.integer)) or value < 16 or value % 8:
@@ -104,8 +113,15 @@ class TileProcessor:
         offsets = np.asarray(camera_offsets, dtype=np.float32)
         if offsets.ndim != 2 or offsets.shape[1] != 2 or offsets.shape[0] < 2:
             raise ValueError(f"camera_offsets: expected shape (cams >= 2, 2), got {offsets.shape}")
+        if backend not in BACKENDS:
+            raise ValueError(f"backend: expected one of {BACKENDS}, got {backend!r}")
+        if backend == "taichi" and graph:
+            raise ValueError("graph: graph capture records Warp launches; it needs backend='warp', got backend='taichi'")
         init_warp()
+        self.backend = backend
         self.device = wp.get_device(device or default_device())
+        if backend == "taichi" and self.device.is_cuda and self.device.ordinal != 0:
+            raise ValueError(f"device: the Taichi backend runs on cpu or cuda:0 only, got {self.device}")
         self.torch_device = torch.device(wp.device_to_torch(self.device))
         self.height, self.width = int(height), int(width)
         self.tiles_y, self.tiles_x = self.height // 8, self.width // 8
@@ -120,10 +136,11 @@ class TileProcessor:
         self.textures = bool(textures)
         self.texture_config = texture_config.resolved(self.colours)
         self.block_dim = 1 if self.device.is_cpu else CUDA_BLOCK_DIM
-        self.graph = self.device.is_cuda if graph is None else bool(graph)
+        self.graph = (self.device.is_cuda and backend == "warp") if graph is None else bool(graph)
         self._graphs: dict = {}  # (centres given, textures) -> recorded launches
         self._allocate(offsets)
         self._load_kernels(kernels)
+        self._taichi = self._bind_taichi() if backend == "taichi" else None
 
     # --- set-up ------------------------------------------------------------------------------------------
     def _array(self, data, dtype=wp.float32) -> wp.array:
@@ -230,6 +247,43 @@ class TileProcessor:
         self._use_kernels = True
         self._kernels = self._array(k.reshape(-1, 8, 8).astype(np.float32))
 
+    def _bind_taichi(self) -> dict:
+        """Initialise Taichi for the processor's device; torch views (zero-copy) of every buffer the Taichi kernels
+        read or write (bool masks as uint8), and the inverse-transform tables of the Taichi correlate kernel, all
+        from ``tpnet_gpu.tables``."""
+        from tpnet_gpu import taichi_setup  # noqa: PLC0415 - Taichi is imported only for this backend
+
+        arch = "cuda" if self.device.is_cuda else "cpu"
+        taichi_setup.init_taichi(arch)
+        t = wp.to_torch
+
+        def u8(a: wp.array) -> torch.Tensor:
+            return t(a).view(torch.uint8)
+
+        def table(data, dtype=torch.float32) -> torch.Tensor:
+            return torch.tensor(np.ascontiguousarray(data), dtype=dtype, device=self.torch_device)
+
+        unfold = [tables.unfold_matrix(sine, tables.CORR_RADIUS) for sine in (False, True)]
+        return {
+            "arch": arch,
+            "padded": t(self._padded), "disparity": self._disparity_t, "offsets": t(self._offsets),
+            "centres": self._centres_t, "active": u8(self._active), "all_active": u8(self._all_active),
+            "masks": t(self._masks), "kernels": t(self._kernels), "clt": t(self._clt), "finite": u8(self._finite),
+            "valid": u8(self._valid), "corr": t(self._corr), "layers": None if self._layers is None else t(self._layers),
+            "pairs": t(self._pairs), "colour_weights": t(self._colour_weights), "lpf_rb": t(self._lpf_rb),
+            "lpf_corr": t(self._lpf_corr),
+            "dtt2e": table(np.stack([0.5 * tables.dtt2e_matrix(sine) for sine in (False, True)])),
+            "unfold_index": table(np.stack([np.abs(u).argmax(axis=1) for u in unfold]), torch.int32),
+            "unfold_sign": table(np.stack([u.sum(axis=1) for u in unfold])),
+            **({} if not self.textures else {
+                "pix": t(self._tex_pix), "cmp": t(self._tex_cmp), "weights": t(self._tex_weights),
+                "canvas": self._canvas_t, "tex_lpf": t(self._tex_lpf), "inv_cos": t(self._inv_cos),
+                "inv_sin": t(self._inv_sin), "tex_weights_c": t(self._tex_weights_c),
+                "channel_of_colour": t(self._channel_of_colour),
+                "window2": table(np.outer(tables.half_sine(np.arange(16)) ** 2, tables.half_sine(np.arange(16)) ** 2)),
+            }),
+        }
+
     # --- inputs --------------------------------------------------------------------------------------------
     def _frames_array(self, frames_in, *, stage: bool = False) -> wp.array:
         shape = (self.cams, self.height, self.width)
@@ -334,9 +388,22 @@ class TileProcessor:
             self._launch_texture()
 
     @contextlib.contextmanager
-    def _launching(self):
-        """Serialise CPU tile launches (platform.md §1) and, on CUDA, run Warp on torch's current stream so
-        torch's input copies and readers of the outputs are ordered with the kernels. Yields the stream."""
+    def _launching(self, backend: str | None = None):
+        """Warp: serialise CPU tile launches (platform.md §1) and, on CUDA, run Warp on torch's current stream so
+        torch's input copies and readers of the outputs are ordered with the kernels. Yields the stream.
+        Taichi (``backend`` defaults to the processor's): serialise launches (one runtime per process), make the
+        processor's arch current and, on CUDA, wait for torch's stream before and for Taichi after the kernels."""
+        if (backend or self.backend) == "taichi":
+            from tpnet_gpu import taichi_setup  # noqa: PLC0415
+
+            with _TAICHI_LOCK:
+                taichi_setup.use_arch(self._taichi["arch"])
+                if self.device.is_cuda:
+                    torch.cuda.current_stream(self.torch_device).synchronize()
+                yield None
+                if self.device.is_cuda:
+                    taichi_setup.ti.sync()
+            return
         with _CPU_LAUNCH_LOCK:
             if self.device.is_cuda:
                 stream = wp.stream_from_torch(torch.cuda.current_stream(self.torch_device))
@@ -373,6 +440,15 @@ class TileProcessor:
         return frames_wp
 
     def _launch_prepare(self, frames_wp: wp.array, ideal: bool) -> None:
+        if self._taichi is not None:
+            from tpnet_gpu.kernels import taichi_frames  # noqa: PLC0415
+
+            v = self._taichi
+            if ideal:
+                taichi_frames.ideal_tile_centres(v["disparity"], v["offsets"], v["centres"])
+            frames_t = self._frames_t if frames_wp is self._frames else wp.to_torch(frames_wp, requires_grad=False)
+            taichi_frames.pad_frames(frames_t, v["padded"])
+            return
         d = self.device
         if ideal:
             wp.launch(
@@ -402,6 +478,16 @@ class TileProcessor:
             self._launch_texture()
 
     def _launch_convert(self) -> None:
+        if self._taichi is not None:
+            from tpnet_gpu.kernels import taichi_convert  # noqa: PLC0415
+
+            v = self._taichi
+            taichi_convert.convert_tiles(
+                v["padded"], v["centres"], v["active"] if self._active_in is self._active else v["all_active"],
+                v["masks"], v["kernels"], self._kernel_grid[0], self._kernel_grid[1], int(self._use_kernels),
+                self.height, self.width, self.colours, v["clt"], v["finite"], v["valid"],
+            )
+            return
         wp.launch_tiled(
             convert.convert_tiles,
             dim=[self.tiles],
@@ -417,6 +503,17 @@ class TileProcessor:
 
     def _launch_correlate(self) -> None:
         cfg = self.config
+        if self._taichi is not None:
+            from tpnet_gpu.kernels import taichi_correlate  # noqa: PLC0415
+
+            v = self._taichi
+            taichi_correlate.correlate_tiles(
+                v["clt"], v["finite"], v["pairs"], self.cams, self.colours, v["colour_weights"], cfg.fat_zero,
+                v["lpf_rb"], v["lpf_corr"], v["dtt2e"], v["unfold_index"], v["unfold_sign"], v["corr"],
+            )
+            if v["layers"] is not None:
+                taichi_correlate.network_layers(v["corr"], cfg.net_offset, v["layers"])
+            return
         wp.launch_tiled(
             correlate.correlate_tiles,
             dim=[self.tiles],
@@ -440,6 +537,21 @@ class TileProcessor:
 
     def _launch_texture(self) -> None:
         tc, d = self.texture_config, self.device
+        if self._taichi is not None:
+            from tpnet_gpu.kernels import taichi_texture  # noqa: PLC0415
+
+            v = self._taichi
+            taichi_texture.clear_canvas(v["canvas"])
+            taichi_texture.texture_imclt(v["clt"], v["finite"], self.cams, self.colours, v["tex_lpf"], v["inv_cos"],
+                                         v["inv_sin"], v["pix"])
+            taichi_texture.texture_demosaic(v["pix"], v["finite"], self.cams, self.colours, tc.scale_shot,
+                                            tc.min_shot, v["window2"], v["cmp"])
+            taichi_texture.texture_combine(
+                v["pix"], v["cmp"], v["finite"], self.tiles_x, self.tiles_y, self.cams, self.colours, v["offsets"],
+                v["tex_weights_c"], v["channel_of_colour"], tc.diff_sigma, tables.TEXTURE_WEIGHT_FLOOR,
+                int(tc.dust_remove), tc.output_gain, v["window2"], v["weights"], v["canvas"],
+            )
+            return
         per_pixel = (self.tiles * self.cams * self.colours, 16, 16)
         wp.launch(texture.clear_canvas, dim=self._canvas.shape, outputs=[self._canvas], device=d)
         wp.launch_tiled(

@@ -25,13 +25,13 @@ def _scene(rng, d):
 
 
 @pytest.mark.parametrize("cfa, diff_sigma", [("GRBG", 50.0), (None, 500.0)])
-def test_texture_equals_reference(device, cfa, diff_sigma):
+def test_texture_equals_reference(device, backend, cfa, diff_sigma):
     rng = np.random.default_rng(50)
     _, frames = _scene(rng, 1.3)
     disparity = (1.3 + rng.uniform(-0.3, 0.3, size=(H // 8, W // 8))).astype(np.float32)
     disparity[2, 3] = np.nan  # a masked tile: no contribution, its neighbours fade towards it
     config = TextureConfig(diff_sigma=diff_sigma)
-    tp = TileProcessor(H, W, cfa=cfa, textures=True, texture_config=config, device=device)
+    tp = TileProcessor(H, W, cfa=cfa, textures=True, texture_config=config, device=device, backend=backend)
     out = tp.process(frames, disparity)
     clt = reference_clt(frames, out.centres.cpu().numpy(), cfa)
     rgba = tex.texture_tiles(clt, OFFSETS, diff_sigma=diff_sigma)
@@ -44,12 +44,12 @@ def test_texture_equals_reference(device, cfa, diff_sigma):
         assert relative_error(out.texture[channel], want[channel]) <= 1e-5
 
 
-def test_texture_alpha_drops_at_a_wrong_disparity(device):
+def test_texture_alpha_drops_at_a_wrong_disparity(device, backend):
     # Physical fact: at the true disparity the cameras agree (alpha ~1), 1 px off they do not (measured 0.99
     # vs 0.64 with diff_sigma 2 on this scene; the default 5 gives 0.998 vs 0.89).
     rng = np.random.default_rng(51)
     colour, frames = _scene(rng, 1.3)
-    tp = TileProcessor(H, W, textures=True, texture_config=TextureConfig(diff_sigma=2.0), device=device)
+    tp = TileProcessor(H, W, textures=True, texture_config=TextureConfig(diff_sigma=2.0), device=device, backend=backend)
     inner = (slice(8, -8), slice(8, -8))
     right = tp.process(frames, 1.3).texture.cpu().numpy().copy()
     wrong = tp.process(frames, 2.3).texture.cpu().numpy()
@@ -58,8 +58,8 @@ def test_texture_alpha_drops_at_a_wrong_disparity(device):
     assert np.corrcoef(green.ravel(), colour[2][inner].ravel())[0, 1] > 0.95
 
 
-def test_empty_texture_is_zero(device):
-    tp = TileProcessor(H, W, textures=True, device=device)
+def test_empty_texture_is_zero(device, backend):
+    tp = TileProcessor(H, W, textures=True, device=device, backend=backend)
     frames = np.full((4, H, W), 100.0, dtype=np.float32)
     out = tp.process(frames, 0.0, active=np.zeros((H // 8, W // 8), dtype=bool))
     assert np.all(out.texture.cpu().numpy() == 0)
