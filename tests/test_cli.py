@@ -23,12 +23,12 @@ def test_demo_writes_pictures_and_report(tmp_path, capsys):
 
 def test_process_scene_folder_and_bad_inputs(tmp_path, capsys):
     assert main(["render", str(tmp_path / "s"), "--width", "96", "--height", "64", "--supersample", "1"]) == 0
-    assert main(["process", str(tmp_path / "s"), "--out", str(tmp_path / "o"), "--device", "cpu"]) == 0
+    assert main(["process", str(tmp_path / "s"), "--out", str(tmp_path / "o"), "--device", "cpu",
+                 "--backend", "warp"]) == 0
     disparity = tifffile.imread(tmp_path / "o" / "disparity.tif")
     assert disparity.shape == (8, 12) and np.isfinite(disparity).any()
-    # The Taichi backend gives the same disparities (same math; float32 rounding differs).
-    assert main(["process", str(tmp_path / "s"), "--out", str(tmp_path / "t"), "--device", "cpu",
-                 "--backend", "taichi"]) == 0
+    # The Taichi backend (the CPU default) gives the same disparities (same math; float32 rounding differs).
+    assert main(["process", str(tmp_path / "s"), "--out", str(tmp_path / "t"), "--device", "cpu"]) == 0
     np.testing.assert_allclose(tifffile.imread(tmp_path / "t" / "disparity.tif"), disparity, atol=1e-3)
     assert (tmp_path / "o" / "texture.png").exists()
     capsys.readouterr()

@@ -146,7 +146,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--height", type=int, default=480, help="frame height, pixels (multiple of 8)")
     demo.add_argument("--seed", type=int, default=0, help="seed of the scene and the noise")
     demo.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
-    demo.add_argument("--backend", choices=BACKENDS, default="warp", help="tile-processor kernels (default warp)")
+    demo.add_argument("--backend", choices=BACKENDS, default=None,
+                      help="tile-processor kernels (default: taichi on the CPU, warp on CUDA)")
     demo.set_defaults(func=_cmd_demo)
 
     proc = sub.add_parser("process", help="disparity, confidence and texture of a quad frame (scene folder or 4 raws)")
@@ -154,7 +155,8 @@ def build_parser() -> argparse.ArgumentParser:
     proc.add_argument("--out", default="out/process", help="output folder")
     proc.add_argument("--cfa", default=None, help="Bayer pattern of TIFF inputs (e.g. GRBG)")
     proc.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
-    proc.add_argument("--backend", choices=BACKENDS, default="warp", help="tile-processor kernels (default warp)")
+    proc.add_argument("--backend", choices=BACKENDS, default=None,
+                      help="tile-processor kernels (default: taichi on the CPU, warp on CUDA)")
     proc.set_defaults(func=_cmd_process)
 
     rend = sub.add_parser("render", help="render a synthetic quad-camera scene folder (DNGs + ground truth)")
@@ -194,7 +196,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="Laplacian regulariser of the first layer (network.md §2)")
     tr.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     tr.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
-    tr.add_argument("--random-weight", type=float, default=0.3,
+    tr.add_argument("--random-weight", type=float, default=1.0,
                     help="loss weight of the random-offset (+-2 px) targets relative to the others")
     tr.set_defaults(func=_cmd_train)
 

@@ -42,7 +42,7 @@ def correlation_sheet(corr: np.ndarray, tiles: list[int], zoom: int = 6) -> np.n
 
 
 def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int = 0, device: str | None = None,
-             backend: str = "warp") -> dict:
+             backend: str | None = None) -> dict:
     """Render the demo scene, run the pipeline, write the pictures and the report; returns the report."""
     from tpnet_gpu.camera import Rig  # noqa: PLC0415 - heavy imports on use
     from tpnet_gpu.pipeline import Pipeline

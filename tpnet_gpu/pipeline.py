@@ -66,11 +66,12 @@ class Pipeline:
     Args:
         weights: TPNET weights (default: the shipped ones).
         device: "cpu" or "cuda" (default cuda when present).
-        backend: kernel language of the tile processors, "warp" or "taichi" (``TileProcessor``).
+        backend: kernel language of the tile processors, "warp" or "taichi"; None: ``TileProcessor``'s default
+            (Taichi on the CPU, Warp on CUDA).
     """
 
     def __init__(self, height: int, width: int, *, cfa: str = "GRBG", weights=None, device: str | None = None,
-                 config: PipelineConfig = PipelineConfig(), backend: str = "warp"):
+                 config: PipelineConfig = PipelineConfig(), backend: str | None = None):
         from tpnet_gpu.net import infer  # noqa: PLC0415 - torch model loading on use
 
         self.config = config

@@ -86,9 +86,11 @@ class TileProcessor:
             for every later frame; inputs are then always staged into the processor's buffers. Default: on
             CUDA with the Warp backend only (plain launches on the CPU). Warp only.
         device: Warp device ("cpu", "cuda", "cuda:0"); default cuda when present.
-        backend: kernel language, "warp" (default) or "taichi" (``kernels/taichi_*.py``: the same math, inputs
-            and outputs; on the CPU it spreads the tiles over every core, see ``tpnet_gpu.taichi_setup`` for the
-            thread count and the offline cache).
+        backend: kernel language, "warp" or "taichi" (``kernels/taichi_*.py``: the same math, inputs and
+            outputs; on the CPU it spreads the tiles over every core, see ``tpnet_gpu.taichi_setup`` for the
+            thread count and the offline cache). Default (None): the faster by measurement (bench_throughput,
+            README): Taichi on the CPU (3.1x Warp's speed for a full frame on 2 cores), Warp on CUDA and
+            wherever ``graph`` is asked for.
     """
 
     def __init__(
@@ -105,7 +107,7 @@ class TileProcessor:
         texture_config: TextureConfig = TextureConfig(),
         graph: bool | None = None,
         device: str | None = None,
-        backend: str = "warp",
+        backend: str | None = None,
     ):
         for name, value in (("height", height), ("width", width)):
             if not isinstance(value, (int, np.integer)) or value < 16 or value % 8:
@@ -113,13 +115,15 @@ class TileProcessor:
         offsets = np.asarray(camera_offsets, dtype=np.float32)
         if offsets.ndim != 2 or offsets.shape[1] != 2 or offsets.shape[0] < 2:
             raise ValueError(f"camera_offsets: expected shape (cams >= 2, 2), got {offsets.shape}")
-        if backend not in BACKENDS:
-            raise ValueError(f"backend: expected one of {BACKENDS}, got {backend!r}")
+        if backend is not None and backend not in BACKENDS:
+            raise ValueError(f"backend: expected one of {BACKENDS} or None, got {backend!r}")
         if backend == "taichi" and graph:
             raise ValueError("graph: graph capture records Warp launches; it needs backend='warp', got backend='taichi'")
         init_warp()
-        self.backend = backend
         self.device = wp.get_device(device or default_device())
+        if backend is None:
+            backend = "warp" if (graph or self.device.is_cuda) else "taichi"
+        self.backend = backend
         if backend == "taichi" and self.device.is_cuda and self.device.ordinal != 0:
             raise ValueError(f"device: the Taichi backend runs on cpu or cuda:0 only, got {self.device}")
         self.torch_device = torch.device(wp.device_to_torch(self.device))
