@@ -14,7 +14,7 @@ import torch
 from tpnet_gpu.net.model import TPNet
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
-DEFAULT_WEIGHTS = WEIGHTS_DIR / "tpnet_synthetic_v2.pt"
+DEFAULT_WEIGHTS = WEIGHTS_DIR / "tpnet_synthetic_v3.pt"
 
 
 def load(path=None, device=None) -> TPNet:

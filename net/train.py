@@ -44,7 +44,7 @@ class TrainConfig:
     # errors scaled by c / (|target - gt| + c), c = error_scale px (None: plain errors, as the original): the
     # loss asks for an error proportional to the target's, so both coarse corrections and the precision near
     # the answer count, and repeated passes converge
-    error_scale: float | None = 0.1
+    error_scale: float | None = 0.3
 
     def __post_init__(self):
         if len(self.variant_weights) != len(self.variants):
@@ -205,7 +205,9 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
                         "history": history, "config": asdict(config)}, checkpoint)
     manifest = json.loads((Path(data_folder) / "manifest.json").read_text())
     recipe = {"command": f"tpnet dataset {data_folder} --scenes {manifest['spec']['scenes']} && "
-                         f"tpnet train {data_folder} --epochs {config.epochs} --batch {config.batch} --seed {config.seed}",
+                         f"tpnet train {data_folder} --epochs {config.epochs} --batch {config.batch} --seed {config.seed} "
+                         f"--error-scale {config.error_scale or 0} --random-weight "
+                         f"{dict(zip(config.variants, config.variant_weights)).get('random', 1.0)}",
               "config": asdict(config), "data": str(data_folder), "dataset_spec": manifest["spec"],
               "history": history}
     save_weights(model, out_path, recipe)

@@ -55,3 +55,10 @@ def test_backend_choices_are_the_processors():
     from tpnet_gpu.processor import BACKENDS
 
     assert cli.BACKENDS == BACKENDS
+
+
+def test_train_error_scale_default_is_the_configs():
+    from tpnet_gpu import cli
+    from tpnet_gpu.net.train import TrainConfig
+
+    assert cli.TRAIN_ERROR_SCALE == TrainConfig.error_scale

@@ -108,6 +108,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     torch.set_num_threads(args.threads)
     config = TrainConfig(epochs=args.epochs, batch=args.batch, seed=args.seed, w_mode=args.w_mode,
+                         error_scale=args.error_scale or None,
                          variant_weights=tuple(args.random_weight if v == "random" else 1.0 for v in TrainConfig.variants))
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
     result = train(args.data, args.out, config, checkpoint=args.checkpoint, device=device)
@@ -118,6 +119,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 BENCHES = ("tp", "accuracy", "network", "throughput")
+TRAIN_ERROR_SCALE = 0.3  # = TrainConfig.error_scale (not imported here: the CLI starts without torch)
 BACKENDS = ("warp", "taichi")  # TileProcessor's backends (not imported here: the CLI starts without Warp)
 
 
@@ -196,6 +198,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="Laplacian regulariser of the first layer (network.md §2)")
     tr.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     tr.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
+    tr.add_argument("--error-scale", type=float, default=TRAIN_ERROR_SCALE,
+                    help="c (px): errors are scaled by c / (|target - gt| + c); 0: plain errors, as the original")
     tr.add_argument("--random-weight", type=float, default=1.0,
                     help="loss weight of the random-offset (+-2 px) targets relative to the others")
     tr.set_defaults(func=_cmd_train)

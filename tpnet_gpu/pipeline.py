@@ -33,7 +33,7 @@ class PipelineConfig:
     refine_passes: int = 2
     trust: float = 4.0
     min_strength: float = 0.1
-    network_passes: int = 2
+    network_passes: int = 1
     textures: bool = True
 
     def __post_init__(self):
