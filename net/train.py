@@ -1,10 +1,11 @@
 """Training TPNET on data sets built by ``tpnet dataset`` (network.md §4-§7, scaled to our data size).
 
-Dense training: every sample is one scene's whole tile grid and one target variant (heuristic or random);
+Dense training: every sample is one scene's whole tile grid and one target variant (heuristic, random, near);
 the network runs in its whole-frame form (stage 1 once per tile, stage 2 as a 5x5 convolution), so all 5x5
 clusters of a frame share their stage-1 work. Per tile the loss weights follow §5 (ground-truth confidence,
 far-range boost), tiles whose target is more than ``max_offset`` px from the ground truth are left out, and
-hard cases (relative 5x5 ground-truth spread >= 0.4, §6) get half of every batch's weight.
+hard cases (relative 5x5 ground-truth spread >= 0.4, §6) get half of every batch's weight, and each error is
+scaled by c / (|target - gt| + c) (``error_scale`` c; ours, not the original's).
 Loss = sum_n pi_n G_n (clones 5x5, 3x3, 1x1) + 0.1 S (mirror) + 0.5 W (first-layer Laplacian).
 """
 

@@ -45,3 +45,30 @@ def test_relative_spread_scaling():
     gt[3, 3] = 10.0  # max >= 5: spread scaled by 5 / max
     v = relative_spread(gt)
     assert v[3, 3] == pytest.approx(5.0) and v[0, 0] == 0.0
+
+
+class _ZeroResidual:
+    """Stands in for TPNet: predicts the target (residual 0 for every clone)."""
+
+    def forward_frame(self, layers, target, clone=0):
+        return torch.zeros(target.shape + (3,))
+
+
+@pytest.mark.parametrize("error_scale", [None, 0.3])
+def test_error_scale_hand_case(error_scale):
+    # Oracle: hand arithmetic. 4x4 tiles, the 2x2 interior counts (the border is left out); strength 1 and
+    # targets >= 8 px make the confidence and range weights equal, so the loss is the mean squared scaled error.
+    from tpnet_gpu.net.train import sample_loss
+
+    gt = torch.full((4, 4), 10.0)
+    offsets = torch.tensor([[0.0, 0.1], [0.5, -1.5]])
+    target = gt.clone()
+    target[1:3, 1:3] += offsets
+    sample = {"layers": torch.zeros(4, 4, 4, 9, 9), "target": target, "gt": gt, "strength": torch.ones(4, 4),
+              "hard": torch.zeros(4, 4, dtype=torch.bool)}
+    config = TrainConfig(error_scale=error_scale, mirror_lambda=0.0)
+    loss = float(sample_loss(_ZeroResidual(), sample, config))
+    errors = offsets.flatten().double()
+    if error_scale is not None:  # 0 -> 0, 0.1 -> 0.1*0.75, 0.5 -> 0.5*0.375, -1.5 -> -1.5*0.1667
+        errors = errors * error_scale / (errors.abs() + error_scale)
+    assert loss == pytest.approx(float(torch.mean(errors**2)), rel=1e-5)
