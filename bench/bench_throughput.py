@@ -34,20 +34,21 @@ H100 the TP <= 1 ms and TP+network <= 3 ms per quad frame; on CPU the Warp path 
 disparities each time) through ``TileProcessor.process`` and ``TPNet.forward_frame``, sampling the process RSS
 (VmRSS) every 50 frames. Table, paper figures, targets and soak summary go to stdout, progress to stderr, all
 numbers with machine information to JSON.
+
+Modules: this script (the Warp and twin runs, the network split, ``main``); throughput_common.py (log, stage
+timing, agreement), throughput_taichi.py (the Taichi worker processes), throughput_stream.py (graph replay,
+soak), throughput_report.py (table, targets, printed report).
 """
 
 from __future__ import annotations
 
 import argparse
 import gc
-import inspect
 import os
 import platform
-import re
 import sys
 import time
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import torch
@@ -55,53 +56,21 @@ import torch.nn.functional as F
 import warp as wp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_tp import PAPER_GPU, PAPER_TP_MS, cpu_model, device_name, summary, timed_ms  # noqa: E402
+from bench_tp import PAPER_GPU, PAPER_TP_MS, cpu_model, device_name  # noqa: E402
 from numpy_tp import numpy_convert, numpy_correlate  # noqa: E402
-from torch_tp import torch_convert, torch_correlate, torch_layers  # noqa: E402
 from report import save_json  # noqa: E402
+from throughput_common import AGREEMENT_TOL, agreement, log, run_stages  # noqa: E402
+from throughput_report import PAPER_NETWORK_S, print_report, stage_table, targets  # noqa: E402
+from throughput_stream import measure_graph_replay, soak  # noqa: E402
+from throughput_taichi import run_taichi, spawn_taichi, taichi_columns  # noqa: E402
+from torch_tp import torch_convert, torch_correlate, torch_layers  # noqa: E402
 
 from tpnet_gpu import tables  # noqa: E402
 from tpnet_gpu.net import model as net_model  # noqa: E402
 from tpnet_gpu.processor import TileProcessor  # noqa: E402
 from tpnet_gpu.warp_setup import default_device, init_warp  # noqa: E402
 
-# Filippov & Dzhimiev, "See far with TPNET", on a GTX 1050 Ti, one full quad frame (as quoted in the issue):
-# the whole TP 87 ms; the network 0.46 + 0.12 s (listed here beside our stage 1 and stage 2).
-PAPER_NETWORK_S = (0.46, 0.12)
-TARGET_GPU = "H100"
-TARGET_TP_MS = 1.0
-TARGET_TP_NET_MS = 3.0
-TARGET_CPU_RATIO = 2.0
-SOAK_EVERY = 50  # frames between RSS samples
-
 IMPLEMENTATIONS = ("warp", "numpy", "torch")
-
-
-# Table rows: (name, whole frame?). Each implementation maps the names it runs to a callable ``fn()``.
-ROWS = (
-    ("convert", False),
-    ("correlate", False),
-    ("texture", False),  # Warp and Taichi only: no twin (the float64 reference is the oracle)
-    ("network stage 1", False),  # the network rows: one PyTorch model, listed under warp
-    ("network stage 2", False),
-    ("network whole frame", True),
-    ("TP whole frame", True),
-    ("TP+network whole frame", True),
-)
-StageFns = dict[str, Callable[[], None]]
-
-
-def log(message: str) -> None:
-    print(f"[bench_throughput] {message}", file=sys.stderr, flush=True)
-
-
-def rss_kib() -> int:
-    """Resident set size of this process (VmRSS), KiB."""
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1])
-    raise RuntimeError("VmRSS not found in /proc/self/status")
 
 
 # --- network stages ---------------------------------------------------------------------------------------------
@@ -129,123 +98,6 @@ def network_stage2(net: net_model.TPNet, features: torch.Tensor) -> torch.Tensor
     if len(stage2) == 1:
         return z.squeeze(-1)
     return net_model.stage2_output(F.leaky_relu(z, net_model.NEGATIVE_SLOPE), stage2[1:])
-
-
-# --- comparison -------------------------------------------------------------------------------------------------
-AGREEMENT_TOL = 1e-4  # relative to max |warp|, as the twins' tests against the reference
-
-
-def agreement(got, want: torch.Tensor) -> dict:
-    """max |got - want| / max |want| and the number of elements with |got - want| > 1e-4 max |want|, one camera or
-    pair (axis 1) at a time (no full-size temporaries)."""
-    got = torch.as_tensor(got).to(want.device)
-    scale = max(float(want.max()), -float(want.min())) or 1.0
-    diff, over = 0.0, 0
-    for i in range(want.shape[1]):
-        d = (got[:, i] - want[:, i]).abs()
-        diff = max(diff, float(d.max()))
-        over += int((d > AGREEMENT_TOL * scale).sum())
-    return {"max_rel_diff": diff / scale, "elements_over_tol": over, "elements": want.numel()}
-
-
-# --- timing -----------------------------------------------------------------------------------------------------
-def run_stages(label: str, stages: StageFns, sync: Callable[[], None] | None, repeat: int) -> tuple[dict, dict]:
-    """Each stage in order (later stages may read earlier stages' outputs): one warm-up call, then ``repeat``
-    back-to-back timed calls (the steady state of a stream of frames: the first call after another stage pays
-    for cold caches, fresh allocations and idle thread pools). Returns (warm-up ms, run ms lists) by name."""
-    warmup, runs = {}, {}
-    for name, fn in stages.items():
-        warmup[name] = timed_ms(fn, sync)
-        runs[name] = [timed_ms(fn, sync) for _ in range(repeat)]
-        log(f"{label} {name}: warm-up {warmup[name]:.1f} ms, runs " + ", ".join(f"{t:.1f}" for t in runs[name]) + " ms")
-    return warmup, runs
-
-
-def graph_option() -> str | None:
-    """Name of ``TileProcessor``'s graph-capture option, or None when it has none."""
-    params = inspect.signature(TileProcessor.__init__).parameters
-    return next((name for name in ("use_graph", "graph", "cuda_graph", "capture") if name in params), None)
-
-
-def measure_graph_replay(args, cfa, device, frames_t, target, net) -> dict:
-    """``process()`` (prepare + convert + correlate, no textures) with plain launches and with the processor's
-    graph option (record once, replay per frame: a CUDA graph on the GPU), and graph replay + the network."""
-    option = graph_option()
-    if option is None:
-        return {"available": False, "note": "n/a: TileProcessor has no use_graph / graph-capture option"}
-    grid = (*target.shape, 4, 9, 9)
-
-    def sync() -> None:
-        wp.synchronize_device(device)
-        if target.device.type == "cuda":
-            torch.cuda.synchronize(target.device)
-
-    def time_it(graph: bool, network: bool) -> dict:
-        tp = TileProcessor(args.height, args.width, cfa=cfa, device=str(device), backend="warp", **{option: graph})
-
-        def run() -> None:
-            result = tp.process(frames_t, args.disparity)
-            if network:
-                net.forward_frame(result.layers.view(grid), target)
-
-        with torch.inference_mode():
-            timed_ms(run, sync)  # warm-up (and recording)
-            return summary([timed_ms(run, sync) for _ in range(max(args.repeat, 5))])
-
-    out = {"available": True, "option": option, "kind": "CUDA graph" if device.is_cuda else "Warp CPU graph",
-           "plain_process_ms": time_it(False, False)}
-    gc.collect()
-    out["graph_process_ms"] = time_it(True, False)
-    gc.collect()
-    out["graph_process_network_ms"] = time_it(True, True)
-    gc.collect()
-    out["gain"] = out["plain_process_ms"]["median"] / out["graph_process_ms"]["median"]
-    out["note"] = (f"process() (prepare + convert + correlate; graph mode stages the frames into the processor's "
-                   f"buffer) with {option}=False / True; median of {max(args.repeat, 5)}")
-    return out
-
-
-# --- soak -------------------------------------------------------------------------------------------------------
-def soak(args, cfa, device, net: net_model.TPNet, frames_count: int) -> dict:
-    """Stream ``frames_count`` fresh random frames through ``process`` + ``forward_frame``; RSS every 50 frames."""
-    rng = np.random.default_rng(args.seed + 1)
-    tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, device=str(device), backend="warp")
-    cams = len(tables.QUAD_OFFSETS)
-    samples = []
-    start = time.perf_counter()
-    with torch.inference_mode():
-        for i in range(1, frames_count + 1):
-            frames = rng.integers(0, 4096, size=(cams, tp.height, tp.width), dtype=np.uint16).astype(np.float32)
-            target = torch.from_numpy(rng.uniform(-1.0, 5.0, size=(tp.tiles_y, tp.tiles_x)).astype(np.float32))
-            result = tp.process(torch.from_numpy(frames), target)
-            target_d = target.to(tp.torch_device)
-            residual = net.forward_frame(result.layers.view(tp.tiles_y, tp.tiles_x, 4, 9, 9), target_d)
-            if i == 1 or i % SOAK_EVERY == 0 or i == frames_count:
-                float(residual.sum())  # reads the result back: waits for the frame's work
-                samples.append({"frame": i, "rss_kib": rss_kib(), "elapsed_s": time.perf_counter() - start})
-                if i % (10 * SOAK_EVERY) == 0:
-                    log(f"soak: {i}/{frames_count} frames, RSS {samples[-1]['rss_kib'] / 1024:.1f} MiB")
-    wp.synchronize_device(tp.device)
-    elapsed = time.perf_counter() - start
-    rss = np.array([s["rss_kib"] for s in samples], dtype=np.float64)
-    frames_at = np.array([s["frame"] for s in samples], dtype=np.float64)
-    steady = frames_at >= min(2 * SOAK_EVERY, frames_at[-1])  # after the first 100 frames
-    slope = float(np.polyfit(frames_at[steady], rss[steady], 1)[0]) if steady.sum() >= 2 else float("nan")
-    return {
-        "frames": frames_count,
-        "size": {"width": tp.width, "height": tp.height},
-        "every": SOAK_EVERY,
-        "what": "fresh random frames and per-tile targets each frame; TileProcessor.process (textures on, default "
-                "graph setting) + TPNet.forward_frame on its layers (inference mode)",
-        "graph": getattr(tp, "graph", None),
-        "samples": samples,
-        "first_rss_kib": int(rss[0]),
-        "last_rss_kib": int(rss[-1]),
-        "max_rss_kib": int(rss.max()),
-        "growth_kib": int(rss[-1] - rss[0]),
-        "steady_slope_kib_per_1000_frames": 1000.0 * slope,
-        "frames_per_s": frames_count / elapsed,
-    }
 
 
 # --- the three implementations ----------------------------------------------------------------------------------
@@ -373,85 +225,6 @@ def run_twin(impl: str, args, cfa, frames, frames_t, target, net, reference: dic
     return warmup, runs, agree
 
 
-# --- Taichi backend (one process per CPU thread count) ------------------------------------------------------
-def run_taichi(args, cfa, device, frames_t, target, net) -> dict:
-    """The Taichi processor's stages and the network on its layers, in this process (Taichi's thread count is
-    that of this process); then its outputs against a Warp processor's on the same frame."""
-    from tpnet_gpu import taichi_setup  # noqa: PLC0415 - imported by the Taichi worker only
-
-    tdev = target.device
-    start = time.perf_counter()
-    tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, device=str(device), backend="taichi")
-    setup_ms = 1e3 * (time.perf_counter() - start)
-
-    def sync() -> None:
-        if tdev.type == "cuda":
-            taichi_setup.ti.sync()
-            torch.cuda.synchronize(tdev)
-
-    start = time.perf_counter()
-    result = tp.process(frames_t, args.disparity)  # compiles the kernels or loads them from the offline cache
-    sync()
-    first_process_ms = 1e3 * (time.perf_counter() - start)
-    layers = result.layers.view(tp.tiles_y, tp.tiles_x, 4, 9, 9)
-
-    def tp_whole() -> None:
-        tp.prepare(frames_t, args.disparity)
-        tp.convert()
-        tp.correlate()
-
-    def tp_network() -> None:
-        tp_whole()
-        net.forward_frame(layers, target)
-
-    stages = {"convert": tp.convert, "correlate": tp.correlate, "texture": tp.texture, "TP whole frame": tp_whole,
-              "TP+network whole frame": tp_network}
-    label = f"taichi ({taichi_setup.current_arch()}, {taichi_setup.threads()} CPU threads)"
-    with torch.inference_mode():
-        warmup, runs = run_stages(label, stages, sync, args.repeat)
-    tp_whole()
-    sync()
-    log(f"{label}: comparing with warp ...")
-    mine = {name: getattr(result, name).clone() for name in ("corr", "layers")}
-    del tp, result, layers
-    gc.collect()
-    warp_tp = TileProcessor(args.height, args.width, cfa=cfa, device=str(device), graph=False, backend="warp")
-    reference = warp_tp.process(frames_t, args.disparity)
-    wp.synchronize_device(warp_tp.device)
-    agree = {name: agreement(mine[name], getattr(reference, name)) for name in mine}
-    return {"warmup": warmup, "runs": runs, "agreement": agree,
-            "setup": {"taichi_setup_ms": setup_ms, "taichi_first_process_ms": first_process_ms,
-                      "threads": taichi_setup.threads(), "arch": taichi_setup.current_arch()}}
-
-
-def taichi_columns(args, is_cuda: bool) -> list[tuple[str, int | None]]:
-    """(column name, CPU thread count or None) of the Taichi runs this bench makes."""
-    if args.no_taichi:
-        return []
-    if is_cuda:
-        return [("taichi-cuda", None)]
-    return [(f"taichi-{n}t", n) for n in args.taichi_threads]
-
-
-def spawn_taichi(argv: list[str], threads: int | None) -> dict:
-    """This script again in a fresh process, as a Taichi worker with ``threads`` CPU threads; returns its report."""
-    import json  # noqa: PLC0415
-    import subprocess  # noqa: PLC0415
-    import tempfile  # noqa: PLC0415
-
-    with tempfile.TemporaryDirectory() as folder:
-        out = Path(folder) / "taichi.json"
-        env = dict(os.environ)
-        if threads is not None:
-            env["TPNET_TAICHI_THREADS"] = str(threads)
-        cmd = [sys.executable, str(Path(__file__).resolve()), *argv, "--soak", "0", "--json", "",
-               "--taichi-worker", str(out)]
-        done = subprocess.run(cmd, env=env)
-        if done.returncode != 0:
-            raise SystemExit(f"taichi worker ({threads} threads) failed with exit status {done.returncode}")
-        return json.loads(out.read_text())
-
-
 # --- main -------------------------------------------------------------------------------------------------------
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -540,61 +313,9 @@ def main(argv=None) -> dict:
     graph = measure_graph_replay(args, cfa, device, frames_t, target, net)
 
     # --- report ---------------------------------------------------------------------------------------------------
-    table = []
-    for name, whole_frame in ROWS:
-        entry = {"name": name, "whole_frame": whole_frame}
-        for impl in impls:
-            entry[f"{impl}_ms"] = summary(runs[impl][name]) if name in runs.get(impl, {}) else None
-            entry[f"{impl}_warmup_ms"] = warmups.get(impl, {}).get(name)
-        for impl in impls[1:]:
-            peer = entry[f"{impl}_ms"]
-            entry[f"ratio_{impl}_over_warp"] = peer["median"] / entry["warp_ms"]["median"] if peer else None
-        entry["fps"] = {impl: 1e3 / entry[f"{impl}_ms"]["median"] for impl in impls
-                        if whole_frame and entry[f"{impl}_ms"]} or None
-        table.append(entry)
-    by_name = {e["name"]: e for e in table}
-
+    table = stage_table(runs, warmups, impls)
     gpu_name = device_name(device)
-    tp_ms = by_name["TP whole frame"]["warp_ms"]["median"]
-    tp_net_ms = by_name["TP+network whole frame"]["warp_ms"]["median"]
-    if graph["available"]:  # the processor's best path: process() with graph replay
-        tp_ms = min(tp_ms, graph["graph_process_ms"]["median"])
-        tp_net_ms = min(tp_net_ms, graph["graph_process_network_ms"]["median"])
-    full_frame = (args.height, args.width) == (1936, 2592)
-    targets = {
-        "gpu_tp": {"target": f"on an {TARGET_GPU}: TP <= {TARGET_TP_MS:g} ms per quad frame", "ours_ms": tp_ms,
-                   "ours_is": "best of the stage launches and process() with graph replay"},
-        "gpu_tp_network": {"target": f"on an {TARGET_GPU}: TP+network <= {TARGET_TP_NET_MS:g} ms per quad frame",
-                           "ours_ms": tp_net_ms,
-                           "ours_is": "best of the stage launches and process() with graph replay, + forward_frame"},
-    }
-    applies = is_cuda and TARGET_GPU in gpu_name and full_frame
-    why = None if applies else ("needs a CUDA run on an H100" if not (is_cuda and TARGET_GPU in gpu_name)
-                                else "needs the full 2592x1936 frame")
-    for key, limit in (("gpu_tp", TARGET_TP_MS), ("gpu_tp_network", TARGET_TP_NET_MS)):
-        targets[key]["met"] = (targets[key]["ours_ms"] <= limit) if applies else None
-        targets[key]["not_applicable"] = why
-    cpu_ratio = by_name["TP whole frame"]["ratio_numpy_over_warp"]
-    cpu_applies = not is_cuda and full_frame
-    targets["cpu_warp_vs_numpy"] = {
-        "target": f"on CPU: Warp path >= {TARGET_CPU_RATIO:g}x the vectorised NumPy one (TP whole frame)",
-        "ours_ratio": cpu_ratio,
-        "met": (cpu_ratio >= TARGET_CPU_RATIO) if cpu_applies and cpu_ratio is not None else None,
-        "not_applicable": None if cpu_applies else ("CPU runs only" if is_cuda else "needs the full 2592x1936 frame"),
-    }
-    # the CPU default backend (TileProcessor(backend=None) on the CPU is Taichi on every core) against NumPy
-    tp_row = by_name["TP whole frame"]
-    threads = {c: int(m.group(1)) for c in tp_row if tp_row[c] and (m := re.fullmatch(r"taichi-(\d+)t_ms", c))}
-    fastest = max(threads, key=threads.get, default=None)  # the most threads: the default uses every core
-    if fastest is not None and tp_row["numpy_ms"]:
-        ratio = tp_row["numpy_ms"]["median"] / tp_row[fastest]["median"]
-        targets["cpu_default_vs_numpy"] = {
-            "target": f"on CPU: the default backend ({fastest[:-3]}) >= {TARGET_CPU_RATIO:g}x the vectorised NumPy one "
-                      "(TP whole frame)",
-            "ours_ratio": ratio,
-            "met": (ratio >= TARGET_CPU_RATIO) if cpu_applies else None,
-            "not_applicable": None if cpu_applies else ("CPU runs only" if is_cuda else "needs the full 2592x1936 frame"),
-        }
+    report_targets = targets(table, graph, gpu_name, is_cuda, (args.height, args.width))
 
     report = {
         "frame": {"width": args.width, "height": args.height, "cameras": cams, "tiles": tiles_y * tiles_x,
@@ -627,7 +348,7 @@ def main(argv=None) -> dict:
         "graph_replay": graph,
         "paper": {"gpu": PAPER_GPU, "tp_ms": PAPER_TP_MS, "network_s": list(PAPER_NETWORK_S),
                   "note": "one full quad frame; comparable only with CUDA timings"},
-        "targets": targets,
+        "targets": report_targets,
         "soak": soak_report,
         "device": {"warp_device": str(device), "torch_device": str(tdev), "name": gpu_name, "is_cuda": is_cuda},
         "machine": {"platform": platform.platform(), "python": platform.python_version(),
@@ -643,83 +364,6 @@ def main(argv=None) -> dict:
     if args.json:
         log(f"wrote {save_json(report, args.json)}")
     return report
-
-
-def _fmt_table(header, rows) -> list[str]:
-    widths = [max(len(r[i]) for r in rows + [header]) for i in range(len(header))]
-    line = " | ".join(f"{{:{'<' if i == 0 else '>'}{w}}}" for i, w in enumerate(widths))
-    return [line.format(*header), "-+-".join("-" * w for w in widths)] + [line.format(*r) for r in rows]
-
-
-def print_report(report: dict) -> None:
-    f, t, d = report["frame"], report["timing"], report["device"]
-
-    def ms(x):
-        if x is None:
-            return "-"
-        return f"{x['median']:.3f}" if x["median"] < 10 else f"{x['median']:.1f}"
-
-    def ratio(x):
-        return "-" if x is None else f"{x:.2f}"
-
-    print(f"Throughput, {f['width']}x{f['height']}, {f['cameras']} cameras ({f['cfa'] or 'mono'}), {f['tiles']} tiles, "
-          f"{f['pairs']} pairs")
-    print(f"device: {d['warp_device']} = {d['name']}; torch threads {report['machine']['torch_threads']}; "
-          f"median of {t['repeat']} back-to-back runs after a warm-up call, per row")
-    taichi = [c for c in report["columns"] if c.startswith("taichi")]
-    rows = [(s["name"], ms(s["warp_ms"]), ms(s["numpy_ms"]), ms(s["torch_ms"]), *(ms(s[f"{c}_ms"]) for c in taichi),
-             ratio(s["ratio_numpy_over_warp"]), ratio(s["ratio_torch_over_warp"]),
-             *(ratio(s[f"ratio_{c}_over_warp"]) for c in taichi), f"{s['fps']['warp']:.2f}" if s["fps"] else "-")
-            for s in report["stages"]]
-    header = ("stage", "warp ms", "numpy ms", "torch ms", *(f"{c} ms" for c in taichi), "numpy/warp", "torch/warp",
-              *(f"{c}/warp" for c in taichi), "fps (warp)")
-    print("\n".join(_fmt_table(header, rows)))
-    print("network rows: the same PyTorch TPNet for every path, on the processor's device (listed under warp); "
-          "whole-frame twins: their TP, then torch_layers + that network")
-    fps = {s["name"]: s["fps"] for s in report["stages"] if s["fps"]}
-    for name in ("TP whole frame", "TP+network whole frame"):
-        print(f"frames/s, {name}: " + ", ".join(f"{k} {v:.2f}" for k, v in fps[name].items()))
-    for impl, a in report["agreement"].items():
-        if isinstance(a, dict):
-            print(f"{impl} vs warp, max relative difference (elements > {AGREEMENT_TOL:g} max |warp|): " + ", ".join(
-                f"{k} {v['max_rel_diff']:.2e} ({v['elements_over_tol']} of {v['elements']})" for k, v in a.items()))
-    if any(isinstance(a, dict) and a["layers"]["elements_over_tol"] for a in report["agreement"].values()):
-        print(f"  layers: {report['agreement']['layers_note']}")
-    print(f"network split (stage 1 -> stage 2) vs forward_frame, max abs difference: "
-          f"{report['agreement']['network_split_vs_forward_frame_max_abs_diff']:.2e}")
-    g = report["graph_replay"]
-    if g["available"]:
-        print(f"graph replay ({g['kind']}, TileProcessor({g['option']}=True)): process() "
-              f"{g['plain_process_ms']['median']:.3f} ms plain -> {g['graph_process_ms']['median']:.3f} ms replayed, "
-              f"gain {g['gain']:.2f}x; replay + network {g['graph_process_network_ms']['median']:.3f} ms")
-    else:
-        print(f"graph replay gain: {g['note']}")
-    p = report["paper"]
-    by_name = {s["name"]: s for s in report["stages"]}
-    ours = {k: by_name[k]["warp_ms"]["median"] for k in
-            ("TP whole frame", "network stage 1", "network stage 2", "network whole frame", "TP+network whole frame")}
-    print(f"paper ({p['gpu']}, full quad frame): TP {p['tp_ms']:.0f} ms, network {p['network_s'][0]:.2f} + "
-          f"{p['network_s'][1]:.2f} s = {sum(p['network_s']):.2f} s, TP+network "
-          f"{p['tp_ms'] / 1e3 + sum(p['network_s']):.3f} s")
-    print(f"ours ({d['name']}, {f['width']}x{f['height']}): TP {ours['TP whole frame']:.4g} ms, network stage 1 + "
-          f"stage 2 {ours['network stage 1']:.4g} + {ours['network stage 2']:.4g} ms (whole frame "
-          f"{ours['network whole frame']:.4g} ms), TP+network {ours['TP+network whole frame']:.4g} ms"
-          + ("" if d["is_cuda"] else " [CPU: not comparable with the paper's GPU figures]"))
-    for target in report["targets"].values():
-        value = target.get("ours_ms")
-        got = f"ours {value:.3f} ms" if value is not None else (
-            f"ours {target['ours_ratio']:.2f}x" if target.get("ours_ratio") is not None else "ours -")
-        verdict = ("MET" if target["met"] else "NOT MET") if target["met"] is not None else \
-            f"n/a ({target['not_applicable']})"
-        print(f"target: {target['target']}: {got} -> {verdict}")
-    s = report["soak"]
-    if s:
-        print(f"soak: {s['frames']} frames of {s['size']['width']}x{s['size']['height']} through process() + "
-              f"forward_frame at {s['frames_per_s']:.1f} frames/s; RSS first {s['first_rss_kib'] / 1024:.1f} MiB "
-              f"(after frame 1), last {s['last_rss_kib'] / 1024:.1f} MiB, growth {s['growth_kib'] / 1024:+.1f} MiB "
-              f"(max {s['max_rss_kib'] / 1024:.1f} MiB; after frame 100: "
-              f"{s['steady_slope_kib_per_1000_frames'] / 1024:+.2f} MiB per 1000 frames)")
-        print("soak RSS MiB by frame: " + ", ".join(f"{x['frame']}: {x['rss_kib'] / 1024:.1f}" for x in s["samples"]))
 
 
 if __name__ == "__main__":
