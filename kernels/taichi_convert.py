@@ -15,11 +15,8 @@ import taichi as ti
 
 from tpnet_gpu.kernels.frames import CENTRE_LIMIT, HALF_WINDOW, WINDOW
 from tpnet_gpu.kernels.taichi_frames import window_corner
-
-N = 8  # DTT size: 8 frequencies per axis
-
-F32_3D = ti.types.ndarray(dtype=ti.f32, ndim=3)
-U8_1D = ti.types.ndarray(dtype=ti.u8, ndim=1)
+from tpnet_gpu.kernels.taichi_types import F32_3D, U8_1D
+from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
 
 
 # --- element functions --------------------------------------------------------------------------------------

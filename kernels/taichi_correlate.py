@@ -14,15 +14,8 @@ Layouts: ``clt`` (tiles * cams * colours * 4, 8, 8); ``corr`` (tiles * pairs, 15
 import taichi as ti
 
 from tpnet_gpu.kernels.correlate import CORR_SIDE, NET_CROP
-
-N = 8  # frequencies per axis
-
-F32_1D = ti.types.ndarray(dtype=ti.f32, ndim=1)
-F32_2D = ti.types.ndarray(dtype=ti.f32, ndim=2)
-F32_3D = ti.types.ndarray(dtype=ti.f32, ndim=3)
-F32_4D = ti.types.ndarray(dtype=ti.f32, ndim=4)
-I32_2D = ti.types.ndarray(dtype=ti.i32, ndim=2)
-U8_1D = ti.types.ndarray(dtype=ti.u8, ndim=1)
+from tpnet_gpu.kernels.taichi_types import F32_1D, F32_2D, F32_3D, F32_4D, I32_2D, U8_1D
+from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
 
 
 @ti.func

@@ -7,9 +7,7 @@ Warp module's own. Every array is an external torch tensor (``ti.types.ndarray``
 import taichi as ti
 
 from tpnet_gpu.kernels.frames import PAD, TILE_STEP, WINDOW
-
-F32_3D = ti.types.ndarray(dtype=ti.f32, ndim=3)
-F32_2D = ti.types.ndarray(dtype=ti.f32, ndim=2)
+from tpnet_gpu.kernels.taichi_types import F32_2D, F32_3D
 
 
 @ti.func

@@ -9,14 +9,9 @@ overlap-added into the canvas), ``clear_canvas``. Bool masks are uint8 views; ``
 
 import taichi as ti
 
-N = 8  # frequencies per axis
-SIDE = 16  # tile side, pixels
-
-F32_1D = ti.types.ndarray(dtype=ti.f32, ndim=1)
-F32_2D = ti.types.ndarray(dtype=ti.f32, ndim=2)
-F32_3D = ti.types.ndarray(dtype=ti.f32, ndim=3)
-I32_1D = ti.types.ndarray(dtype=ti.i32, ndim=1)
-U8_1D = ti.types.ndarray(dtype=ti.u8, ndim=1)
+from tpnet_gpu.kernels.taichi_types import F32_1D, F32_2D, F32_3D, I32_1D, U8_1D
+from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
+from tpnet_gpu.tables import TILE_SIZE as SIDE  # window side, pixels
 
 
 @ti.kernel
