@@ -90,18 +90,12 @@ def main(argv=None) -> int:
     scenes = [run_scene(i, args, rig) for i in range(args.scenes)]
 
     methods = list(scenes[0]["estimates"])
-    stats, curves = report_tools.summarise(scenes, methods)
     title = (f"Disparity accuracy, {args.scenes} rendered scenes of {args.width}x{args.height} (quad, 258 mm, "
              f"noise on), tile classes: tpnet_gpu/evaluation.py")
-    lines = report_tools.table(stats, title, reference=methods[0])
-    print("\n".join(lines))
-
-    report = {"bench": "accuracy", "scenes": args.scenes, "width": args.width, "height": args.height,
-              "seed": args.seed, "machine": {"platform": platform.platform(), "python": platform.python_version()},
-              "optics": str(Optics()), "sensor": str(Sensor()), "stats": stats, "rmse_by_spread": curves, "table": lines}
-    report_tools.save_json(report, args.json)
-    report_tools.plot(curves, args.png, title)
-    log(f"saved {args.json} and {args.png}")
+    meta = {"bench": "accuracy", "scenes": args.scenes, "width": args.width, "height": args.height,
+            "seed": args.seed, "machine": {"platform": platform.platform(), "python": platform.python_version()},
+            "optics": str(Optics()), "sensor": str(Sensor())}
+    report_tools.publish(scenes, methods, title, methods[0], meta, args.json, args.png, log=log)
     return 0
 
 

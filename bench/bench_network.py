@@ -92,17 +92,11 @@ def main(argv=None) -> int:
                        "spread": rendered.tile_spread, "estimates": estimates})
 
     methods = ["LMA baseline"] + [pass_name(n) for n in range(1, args.passes + 1)]
-    stats, curves = report_tools.summarise(scenes, methods, reference="LMA baseline")
     title = (f"TPNET vs the LMA baseline, {args.scenes} held-out rendered scenes of {args.width}x{args.height} "
              f"(seeds {args.seed}+), weights {args.weights or infer.DEFAULT_WEIGHTS.name}")
-    lines = report_tools.table(stats, title, reference="LMA baseline")
-    print("\n".join(lines))
-    report = {"bench": "network", "scenes": args.scenes, "width": args.width, "height": args.height,
-              "seed": args.seed, "passes": args.passes, "machine": platform.platform(), "stats": stats,
-              "rmse_by_spread": curves, "table": lines}
-    report_tools.save_json(report, args.json)
-    report_tools.plot(curves, args.png, title)
-    log(f"saved {args.json} and {args.png}")
+    meta = {"bench": "network", "scenes": args.scenes, "width": args.width, "height": args.height,
+            "seed": args.seed, "passes": args.passes, "machine": platform.platform()}
+    report_tools.publish(scenes, methods, title, "LMA baseline", meta, args.json, args.png, log=log)
     return 0
 
 

@@ -90,3 +90,17 @@ def save_json(report: dict, path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(report, indent=1, default=float) + "\n")
     return path
+
+
+def publish(scenes: list[dict], methods: list[str], title: str, reference: str, meta: dict, json_path, png_path,
+            log=print) -> dict:
+    """The accuracy benches' common end: statistics (with ``rmse_common`` against ``reference``), the table
+    printed, the JSON (``meta`` + stats, curves and table) and the RMSE-vs-spread PNG written. Returns the report."""
+    stats, curves = summarise(scenes, methods, reference=reference)
+    lines = table(stats, title, reference=reference)
+    print("\n".join(lines))
+    report = {**meta, "stats": stats, "rmse_by_spread": curves, "table": lines}
+    save_json(report, json_path)
+    plot(curves, png_path, title)
+    log(f"saved {json_path} and {png_path}")
+    return report

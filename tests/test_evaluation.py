@@ -38,3 +38,6 @@ def test_reference_inliers_and_common_rmse():
     stats = evaluation.error_stats(est, gt, np.ones((2, 3), bool), common)
     assert np.isclose(stats["rmse_common"], np.sqrt((0.09 + 0.16 + 25.0) / 4))  # the gross 5.0 stays in
     assert "rmse_common" not in evaluation.error_stats(est, gt, np.ones((2, 3), bool))
+    est[1, 2] = np.nan  # a tile the method misses is left out of its common RMSE (coverage counts it)
+    stats = evaluation.error_stats(est, gt, np.ones((2, 3), bool), common)
+    assert np.isclose(stats["rmse_common"], np.sqrt((0.09 + 0.16) / 3)) and np.isclose(stats["coverage"], 5 / 6)

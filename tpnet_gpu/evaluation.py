@@ -43,11 +43,12 @@ def error_stats(estimate: np.ndarray, gt: np.ndarray, mask: np.ndarray, common: 
     """RMSE, median |error|, coverage (share of the masked tiles with a finite estimate), the share of gross
     errors (|error| > 1 px among the finite ones) and the RMSE of the rest (``rmse_inliers``). With ``common``
     (a mask of tiles chosen the same for every method, e.g. :func:`reference_inliers`), also ``rmse_common``:
-    the RMSE over ``mask & common`` (NaN if the estimate misses one of them)."""
+    the RMSE over the tiles of ``mask & common`` the estimate covers (its ``coverage`` says how many it misses)."""
     extra = {}
     if common is not None:
         sel = np.asarray(mask, dtype=bool) & np.asarray(common, dtype=bool)
         err_c = np.asarray(estimate, dtype=np.float64)[sel] - np.asarray(gt, dtype=np.float64)[sel]
+        err_c = err_c[np.isfinite(err_c)]
         extra["rmse_common"] = float(np.sqrt(np.mean(err_c**2))) if err_c.size else float("nan")
     est = np.asarray(estimate, dtype=np.float64)[mask]
     ref = np.asarray(gt, dtype=np.float64)[mask]
