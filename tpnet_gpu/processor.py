@@ -144,7 +144,11 @@ class TileProcessor:
         self._graphs: dict = {}  # (centres given, textures) -> recorded launches
         self._allocate(offsets)
         self._load_kernels(kernels)
-        self._taichi = self._bind_taichi() if backend == "taichi" else None
+        self._taichi = None
+        if backend == "taichi":
+            from tpnet_gpu.taichi_launch import TaichiLaunches  # noqa: PLC0415 - Taichi is imported only for this backend
+
+            self._taichi = TaichiLaunches(self)
 
     # --- set-up ------------------------------------------------------------------------------------------
     def _array(self, data, dtype=wp.float32) -> wp.array:
@@ -250,43 +254,6 @@ class TileProcessor:
         self._kernel_grid = (k.shape[1], k.shape[2])
         self._use_kernels = True
         self._kernels = self._array(k.reshape(-1, 8, 8).astype(np.float32))
-
-    def _bind_taichi(self) -> dict:
-        """Initialise Taichi for the processor's device; torch views (zero-copy) of every buffer the Taichi kernels
-        read or write (bool masks as uint8), and the inverse-transform tables of the Taichi correlate kernel, all
-        from ``tpnet_gpu.tables``."""
-        from tpnet_gpu import taichi_setup  # noqa: PLC0415 - Taichi is imported only for this backend
-
-        arch = "cuda" if self.device.is_cuda else "cpu"
-        taichi_setup.init_taichi(arch)
-        t = wp.to_torch
-
-        def u8(a: wp.array) -> torch.Tensor:
-            return t(a).view(torch.uint8)
-
-        def table(data, dtype=torch.float32) -> torch.Tensor:
-            return torch.tensor(np.ascontiguousarray(data), dtype=dtype, device=self.torch_device)
-
-        unfold = [tables.unfold_matrix(sine, tables.CORR_RADIUS) for sine in (False, True)]
-        return {
-            "arch": arch,
-            "padded": t(self._padded), "disparity": self._disparity_t, "offsets": t(self._offsets),
-            "centres": self._centres_t, "active": u8(self._active), "all_active": u8(self._all_active),
-            "masks": t(self._masks), "kernels": t(self._kernels), "clt": t(self._clt), "finite": u8(self._finite),
-            "valid": u8(self._valid), "corr": t(self._corr), "layers": None if self._layers is None else t(self._layers),
-            "pairs": t(self._pairs), "colour_weights": t(self._colour_weights), "lpf_rb": t(self._lpf_rb),
-            "lpf_corr": t(self._lpf_corr),
-            "dtt2e": table(np.stack([0.5 * tables.dtt2e_matrix(sine) for sine in (False, True)])),
-            "unfold_index": table(np.stack([np.abs(u).argmax(axis=1) for u in unfold]), torch.int32),
-            "unfold_sign": table(np.stack([u.sum(axis=1) for u in unfold])),
-            **({} if not self.textures else {
-                "pix": t(self._tex_pix), "cmp": t(self._tex_cmp), "weights": t(self._tex_weights),
-                "canvas": self._canvas_t, "tex_lpf": t(self._tex_lpf), "inv_cos": t(self._inv_cos),
-                "inv_sin": t(self._inv_sin), "tex_weights_c": t(self._tex_weights_c),
-                "channel_of_colour": t(self._channel_of_colour),
-                "window2": table(np.outer(tables.half_sine(np.arange(16)) ** 2, tables.half_sine(np.arange(16)) ** 2)),
-            }),
-        }
 
     # --- inputs --------------------------------------------------------------------------------------------
     def _frames_array(self, frames_in, *, stage: bool = False) -> wp.array:
@@ -401,7 +368,7 @@ class TileProcessor:
             from tpnet_gpu import taichi_setup  # noqa: PLC0415
 
             with _TAICHI_LOCK:
-                taichi_setup.use_arch(self._taichi["arch"])
+                taichi_setup.use_arch(self._taichi.arch)
                 if self.device.is_cuda:
                     torch.cuda.current_stream(self.torch_device).synchronize()
                 yield None
@@ -445,13 +412,8 @@ class TileProcessor:
 
     def _launch_prepare(self, frames_wp: wp.array, ideal: bool) -> None:
         if self._taichi is not None:
-            from tpnet_gpu.kernels import taichi_frames  # noqa: PLC0415
-
-            v = self._taichi
-            if ideal:
-                taichi_frames.ideal_tile_centres(v["disparity"], v["offsets"], v["centres"])
             frames_t = self._frames_t if frames_wp is self._frames else wp.to_torch(frames_wp, requires_grad=False)
-            taichi_frames.pad_frames(frames_t, v["padded"])
+            self._taichi.prepare(frames_t, ideal)
             return
         d = self.device
         if ideal:
@@ -483,14 +445,7 @@ class TileProcessor:
 
     def _launch_convert(self) -> None:
         if self._taichi is not None:
-            from tpnet_gpu.kernels import taichi_convert  # noqa: PLC0415
-
-            v = self._taichi
-            taichi_convert.convert_tiles(
-                v["padded"], v["centres"], v["active"] if self._active_in is self._active else v["all_active"],
-                v["masks"], v["kernels"], self._kernel_grid[0], self._kernel_grid[1], int(self._use_kernels),
-                self.height, self.width, self.colours, v["clt"], v["finite"], v["valid"],
-            )
+            self._taichi.convert(every_tile=self._active_in is not self._active)
             return
         wp.launch_tiled(
             convert.convert_tiles,
@@ -508,15 +463,7 @@ class TileProcessor:
     def _launch_correlate(self) -> None:
         cfg = self.config
         if self._taichi is not None:
-            from tpnet_gpu.kernels import taichi_correlate  # noqa: PLC0415
-
-            v = self._taichi
-            taichi_correlate.correlate_tiles(
-                v["clt"], v["finite"], v["pairs"], self.cams, self.colours, v["colour_weights"], cfg.fat_zero,
-                v["lpf_rb"], v["lpf_corr"], v["dtt2e"], v["unfold_index"], v["unfold_sign"], v["corr"],
-            )
-            if v["layers"] is not None:
-                taichi_correlate.network_layers(v["corr"], cfg.net_offset, v["layers"])
+            self._taichi.correlate()
             return
         wp.launch_tiled(
             correlate.correlate_tiles,
@@ -542,19 +489,7 @@ class TileProcessor:
     def _launch_texture(self) -> None:
         tc, d = self.texture_config, self.device
         if self._taichi is not None:
-            from tpnet_gpu.kernels import taichi_texture  # noqa: PLC0415
-
-            v = self._taichi
-            taichi_texture.clear_canvas(v["canvas"])
-            taichi_texture.texture_imclt(v["clt"], v["finite"], self.cams, self.colours, v["tex_lpf"], v["inv_cos"],
-                                         v["inv_sin"], v["pix"])
-            taichi_texture.texture_demosaic(v["pix"], v["finite"], self.cams, self.colours, tc.scale_shot,
-                                            tc.min_shot, v["window2"], v["cmp"])
-            taichi_texture.texture_combine(
-                v["pix"], v["cmp"], v["finite"], self.tiles_x, self.tiles_y, self.cams, self.colours, v["offsets"],
-                v["tex_weights_c"], v["channel_of_colour"], tc.diff_sigma, tables.TEXTURE_WEIGHT_FLOOR,
-                int(tc.dust_remove), tc.output_gain, v["window2"], v["weights"], v["canvas"],
-            )
+            self._taichi.texture()
             return
         per_pixel = (self.tiles * self.cams * self.colours, 16, 16)
         wp.launch(texture.clear_canvas, dim=self._canvas.shape, outputs=[self._canvas], device=d)
