@@ -56,7 +56,7 @@ import torch.nn.functional as F
 import warp as wp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_tp import PAPER_GPU, PAPER_TP_MS, cpu_model, device_name  # noqa: E402
+from bench_tp import PAPER_GPU, PAPER_TP_MS, cpu_model, device_name, frame_arguments  # noqa: E402
 from numpy_tp import numpy_convert, numpy_correlate  # noqa: E402
 from report import save_json  # noqa: E402
 from throughput_common import AGREEMENT_TOL, agreement, log, run_stages  # noqa: E402
@@ -228,14 +228,8 @@ def run_twin(impl: str, args, cfa, frames, frames_t, target, net, reference: dic
 # --- main -------------------------------------------------------------------------------------------------------
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--device", default=None, help="Warp device: cpu, cuda, cuda:N (default: cuda if present)")
-    parser.add_argument("--height", type=int, default=1936)
-    parser.add_argument("--width", type=int, default=2592)
-    parser.add_argument("--repeat", type=int, default=3, help="timed passes after the warm-up (default 3)")
+    frame_arguments(parser)
     parser.add_argument("--threads", type=int, default=None, help="torch intra-op threads (default: torch's own)")
-    parser.add_argument("--disparity", type=float, default=2.5, help="target disparity of every tile, px")
-    parser.add_argument("--cfa", default=tables.DEFAULT_CFA, help="Bayer pattern, or 'mono'")
-    parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--soak", type=int, default=0, help="frames to stream for the RSS soak (default 0: none)")
     parser.add_argument("--json", default="out/bench_throughput.json", help="output JSON path ('' to skip)")
     parser.add_argument("--taichi-threads", default="1,2",

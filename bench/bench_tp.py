@@ -124,8 +124,8 @@ def max_relative_difference(got: np.ndarray, want: np.ndarray) -> float:
     return diff / scale if scale > 0 else diff
 
 
-def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def frame_arguments(parser: argparse.ArgumentParser) -> None:
+    """The speed benches' common options: device, frame size, repeats, target disparity, CFA, seed."""
     parser.add_argument("--device", default=None, help="Warp device: cpu, cuda, cuda:N (default: cuda if present)")
     parser.add_argument("--height", type=int, default=1936)
     parser.add_argument("--width", type=int, default=2592)
@@ -133,6 +133,11 @@ def main(argv=None) -> dict:
     parser.add_argument("--disparity", type=float, default=2.5, help="target disparity of every tile, px")
     parser.add_argument("--cfa", default=tables.DEFAULT_CFA, help="Bayer pattern, or 'mono'")
     parser.add_argument("--seed", type=int, default=0)
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    frame_arguments(parser)
     parser.add_argument("--json", default="out/bench_tp.json", help="output JSON path ('' to skip)")
     args = parser.parse_args(argv)
     if args.repeat < 1:
