@@ -1,0 +1,27 @@
+"""Sizes of the tile processor's data layout, one home for each (tile_processor.md §1, §6.3; network.md §1).
+
+Pure Python, no Warp or Taichi import: the Warp kernels, the Taichi kernels, the float64 reference, the host
+tables and the benchmark twins all read these names, so none of them retypes a size.
+"""
+
+DTT_SIZE = 8  # N: points of one 8-point transform; frequencies per axis
+TILE_SIZE = 2 * DTT_SIZE  # 16: side of a tile's window, pixels
+HALF_TILE = DTT_SIZE  # 8: window corner = tile centre - HALF_TILE
+TILE_STRIDE = DTT_SIZE  # 8: tile grid step, pixels; tile (tx, ty) is centred at (8 tx + 4, 8 ty + 4)
+CORR_RADIUS = 7  # pixel-domain correlations keep lags -7..7 (lag +-8 is dropped)
+CORR_SIDE = 2 * CORR_RADIUS + 1  # 15
+NET_RADIUS = 4  # the network reads the 9x9 centre of each combined correlation
+NET_SIDE = 2 * NET_RADIUS + 1  # 9
+NET_CROP = CORR_RADIUS - NET_RADIUS  # 3: first row/column of the network's crop inside a 15x15 correlation
+NET_LAYERS = 4  # combined layers per tile: hor, vert, diag-main, diag-other
+
+# Margin of the padded frames. Even, so padding keeps the Bayer parity; >= TILE_SIZE + 1, so that *any* integer
+# window corner can be moved onto the padded frame without changing what the pair-preserving clamp reads.
+PAD = 18
+# Centres further than this from the image (pixels) are clamped before rounding (int32 safety only).
+CENTRE_LIMIT = 1.0e6
+
+# Threads per block of the tile kernels on CUDA, and of every per-thread launch there (one block size per module
+# keeps Warp from compiling a module twice). On the CPU a block is one lane (platform.md §1).
+CUDA_BLOCK_DIM = 64
+CPU_BLOCK_DIM = 1
