@@ -17,11 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-DTT_SIZE = 8
-TILE_SIZE = 2 * DTT_SIZE  # window side, pixels
-TILE_STRIDE = DTT_SIZE  # tile grid step, pixels
-CORR_RADIUS = 7  # 15x15 pixel-domain correlation
-NET_RADIUS = 4  # 9x9 centre crop the network reads
+# Sizes live in tpnet_gpu.layout (no Warp import); re-exported here for the tables' users.
+from tpnet_gpu.layout import CORR_RADIUS, DTT_SIZE, NET_RADIUS, TILE_SIZE, TILE_STRIDE  # noqa: F401
 
 COLOURS = ("R", "B", "G")
 QUADRANTS = ("CC", "SC", "CS", "SS")

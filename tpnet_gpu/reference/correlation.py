@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tpnet_gpu import tables
+from tpnet_gpu import operators, tables
 from tpnet_gpu.reference.products import correlation_product
 
 
@@ -64,10 +64,8 @@ def corr_to_pixels(x, radius: int = tables.CORR_RADIUS) -> np.ndarray:
     if not 0 <= radius <= tables.CORR_RADIUS:
         raise ValueError(f"radius: expected 0..{tables.CORR_RADIUS}, got {radius}")
     x = np.asarray(x, dtype=np.float64)
-    t = (tables.dtt2e_matrix(sine=False), tables.dtt2e_matrix(sine=True))
-    u = (tables.unfold_matrix(False, radius), tables.unfold_matrix(True, radius))
-    a = (u[0] @ t[0], u[1] @ t[1])  # (2r+1, 8): transform then unfold, per axis
-    return 0.25 * sum(a[q >> 1] @ x[..., q, :, :] @ a[q & 1].T for q in range(4))
+    a = operators.lag_operators(radius)  # (2, 2r+1, 8): 1/2 transform then unfold, per axis
+    return sum(a[q >> 1] @ x[..., q, :, :] @ a[q & 1].T for q in range(4))
 
 
 def crop_centre(corr, radius: int = tables.NET_RADIUS) -> np.ndarray:

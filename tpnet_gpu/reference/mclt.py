@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tpnet_gpu import tables
+from tpnet_gpu import operators, tables
 from tpnet_gpu.reference.products import bmul
 from tpnet_gpu.reference.transforms import dtt4
 
@@ -163,12 +163,6 @@ def convert_tiles(planes, centres, kernels=None) -> tuple[np.ndarray, np.ndarray
 
 
 # --- inverse MCLT and overlap-add ------------------------------------------------------------------------------
-def _inverse_axis(sine: bool) -> np.ndarray:
-    """Per-axis inverse operator ``(16, 8)``: DTT-IV, unfold with the fold signs, window w(n)/2."""
-    win = 0.5 * tables.half_sine(np.arange(N2))
-    return win[:, None] * (tables.fold_matrix(sine).T @ tables.dtt4_matrix(sine))
-
-
 def imclt(f) -> np.ndarray:
     """Inverse MCLT of tiles (§7.1), ``(..., 4, 8, 8) -> (..., 16, 16)``.
 
@@ -176,7 +170,7 @@ def imclt(f) -> np.ndarray:
     For f = mclt(x) at s = 0 this is w(r)^2 w(c)^2 x.
     """
     f = np.asarray(f, dtype=np.float64)
-    g = (_inverse_axis(sine=False), _inverse_axis(sine=True))
+    g = operators.inverse_axes()
     return sum(g[q >> 1] @ f[..., q, :, :] @ g[q & 1].T for q in range(4))
 
 

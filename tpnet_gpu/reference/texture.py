@@ -11,17 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from tpnet_gpu import tables
+from tpnet_gpu import operators, tables
 from tpnet_gpu.reference.mclt import imclt, overlap_add
 
 RB_FILTER = np.array([[1, 2, 1], [2, 4, 2], [1, 2, 1]]) / 16.0
 G_FILTER = np.array([[0, 1, 0], [1, 4, 1], [0, 1, 0]]) / 8.0
-
-
-def window_squared() -> np.ndarray:
-    """w(r)^2 w(c)^2, ``(16, 16)``: what a tile's IMCLT carries before overlap-add."""
-    w2 = tables.half_sine(np.arange(tables.TILE_SIZE)) ** 2
-    return np.outer(w2, w2)
 
 
 def demosaic_interior(u, filt) -> np.ndarray:
@@ -68,7 +62,7 @@ def texture_tiles(
     offsets = np.asarray(camera_offsets, dtype=np.float64)
     lpf = np.stack([tables.lpf(s) for s in lpf_sigmas])  # (colours, 8, 8)
     t = imclt(clt * lpf[:, None])  # (T..., cams, colours, 16, 16)
-    w2 = window_squared()
+    w2 = operators.window_squared()
     if colours == 3:
         u = t / w2
         m = np.stack([demosaic_interior(u[..., k, :, :], G_FILTER if k == 2 else RB_FILTER) for k in range(3)], -3)
