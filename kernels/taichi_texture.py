@@ -3,8 +3,9 @@ agreement (tile_processor.md §7.3, §7.4), spread over every core.
 
 The same launches, arguments, tables and layouts as the Warp module (see there): ``texture_imclt`` (one thread
 per tile, camera and colour: low-pass and inverse MCLT as two matrix products per quadrant), ``texture_demosaic``
-(per pixel), ``texture_combine`` (per pixel: camera weights, colour, alpha and the alpha fade, atomically
-overlap-added into the canvas), ``clear_canvas``. Bool masks are uint8 views; ``offsets`` is (cams, 2).
+(per pixel), ``texture_combine`` (per pixel: camera weights, colour, alpha and the alpha fade, into the
+tile's RGBA contribution), ``overlap_add`` (per canvas pixel, fixed order, no atomics). Bool masks are uint8
+views; ``offsets`` is (cams, 2).
 """
 
 import taichi as ti
@@ -143,11 +144,11 @@ def texture_combine(
     output_gain: ti.f32,
     window2: F32_2D,
     weights: F32_3D,
-    canvas: F32_3D,
+    rgba: F32_3D,
 ):
     """Per pixel (tile, r, c) of contributing tiles: weights (§7.3 a-d), colour = weighted mean of T, alpha =
-    W2 x mean weight, times the alpha fade, atomically added to the canvas (colours x output_gain). window2 as
-    in texture_demosaic."""
+    W2 x mean weight, times the alpha fade, into the tile's contribution ``rgba`` (colours x output_gain).
+    window2 as in texture_demosaic."""
     for tile, r, c in ti.ndrange(finite.shape[0], SIDE, SIDE):
         if finite[tile] != 0:
             w2 = window2[r, c]
@@ -228,17 +229,28 @@ def texture_combine(
             if tx + 1 < tiles_x:
                 east = ti.cast(finite[tile + 1] != 0, ti.i32)
             fade = alpha_fade(north, east, south, west, r, c)
-            y = 8 * ty + r
-            x = 8 * tx + c
+            out = tile * (colours + 1)
             for k in range(colours):
                 acc = 0.0
                 for cam in range(cams):
                     acc += weights[base + cam, r, c] * pix[(base + cam) * colours + k, r, c]
-                ti.atomic_add(canvas[channel_of_colour[k], y, x], output_gain * fade * acc / total)
-            ti.atomic_add(canvas[colours, y, x], fade * w2 * total / ti.cast(cams, ti.f32))
+                rgba[out + channel_of_colour[k], r, c] = output_gain * fade * acc / total
+            rgba[out + colours, r, c] = fade * w2 * total / ti.cast(cams, ti.f32)
 
 
 @ti.kernel
-def clear_canvas(canvas: F32_3D):
-    for c, y, x in canvas:
-        canvas[c, y, x] = 0.0
+def overlap_add(rgba: F32_3D, finite: U8_1D, tiles_x: ti.i32, tiles_y: ti.i32, canvas: F32_3D):
+    """canvas[ch, y, x] = sum of the contributing tiles' ``rgba`` covering (y, x), tiles in row-major order (the
+    Warp kernel's order: bit-reproducible with any thread count); every canvas pixel is written."""
+    for ch, y, x in canvas:
+        channels = canvas.shape[0]
+        acc = 0.0
+        for dy in ti.static(range(2)):
+            for dx in ti.static(range(2)):
+                ty = y // 8 - 1 + dy
+                tx = x // 8 - 1 + dx
+                if ty >= 0 and ty < tiles_y and tx >= 0 and tx < tiles_x:
+                    tile = ty * tiles_x + tx
+                    if finite[tile] != 0:
+                        acc += rgba[tile * channels + ch, y - 8 * ty, x - 8 * tx]
+        canvas[ch, y, x] = acc

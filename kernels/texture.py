@@ -1,15 +1,17 @@
 """Texture: shift-corrected CLT tiles -> RGBA image with alpha from the cameras' agreement (tile_processor.md
 §7.3, §7.4).
 
-Three launches: ``texture_imclt`` (one block per tile: low-pass and inverse MCLT of every camera and colour as
+Four launches: ``texture_imclt`` (one block per tile: low-pass and inverse MCLT of every camera and colour as
 two matrix products per quadrant), ``texture_demosaic`` (per pixel: 3x3 filter of the zero-filled colours and
-shot-noise compression), ``texture_combine`` (per pixel: camera weights, colour, alpha, the alpha fade at the
-edge of the processed region, and an atomic overlap-add into the image canvas).
+shot-noise compression), ``texture_combine`` (per tile pixel: camera weights, colour, alpha and the alpha fade at
+the edge of the processed region, into the tile's RGBA contribution), ``overlap_add`` (per canvas pixel: the sum
+of the up to 4 tiles that cover it, in a fixed order - no float atomics, so the texture is bit-reproducible on
+every device and thread count).
 
 Layouts: ``clt`` (tiles * cams * colours * 4, 8, 8); ``pix``/``cmp`` (tiles * cams * colours, 16, 16) = the
 IMCLT tiles T and the compared values M / W2 (kept unwindowed: dividing a windowed value by the tiny corner
-window again would cost float32 precision); ``weights`` (tiles * cams, 16, 16); ``canvas`` (channels, H + 8,
-W + 8), image pixel u at canvas u + 4.
+window again would cost float32 precision); ``weights`` (tiles * cams, 16, 16); ``rgba`` (tiles * channels, 16, 16) per-tile
+contributions in output channel order; ``canvas`` (channels, H + 8, W + 8), image pixel u at canvas u + 4.
 """
 
 import warp as wp
@@ -150,10 +152,10 @@ def texture_combine(
     dust_remove: bool,
     output_gain: float,
     weights: wp.array3d(dtype=wp.float32),
-    canvas: wp.array3d(dtype=wp.float32),
+    rgba: wp.array3d(dtype=wp.float32),
 ):
     """Per pixel (tile, r, c) of contributing tiles: weights (§7.3 a-d), colour = weighted mean of T, alpha =
-    W2 x mean weight, times the alpha fade, atomically added to the canvas (colours x output_gain)."""
+    W2 x mean weight, times the alpha fade, into the tile's contribution ``rgba`` (colours x output_gain)."""
     tile, r, c = wp.tid()
     if not finite[tile]:
         return
@@ -223,18 +225,32 @@ def texture_combine(
     west = tx == 0 or finite[tile - 1]
     east = tx + 1 == tiles_x or finite[tile + 1]
     fade = alpha_fade(north, east, south, west, r, c)
-    y = 8 * ty + r
-    x = 8 * tx + c
+    out = tile * (colours + 1)
     for k in range(colours):
         acc = float(0.0)
         for cam in range(cams):
             acc += weights[base + cam, r, c] * pix[(base + cam) * colours + k, r, c]
-        wp.atomic_add(canvas, channel_of_colour[k], y, x, output_gain * fade * acc / total)
-    wp.atomic_add(canvas, colours, y, x, fade * w2 * total / float(cams))
+        rgba[out + channel_of_colour[k], r, c] = output_gain * fade * acc / total
+    rgba[out + colours, r, c] = fade * w2 * total / float(cams)
 
 
 @wp.kernel
-def clear_canvas(canvas: wp.array3d(dtype=wp.float32)):
-    """canvas = 0, as a launch (so a recorded graph clears it on every replay)."""
-    c, y, x = wp.tid()
-    canvas[c, y, x] = 0.0
+def overlap_add(
+    rgba: wp.array3d(dtype=wp.float32),
+    finite: wp.array(dtype=wp.bool),
+    tiles_x: int,
+    tiles_y: int,
+    canvas: wp.array3d(dtype=wp.float32),
+):
+    """canvas[ch, y, x] = sum of the contributing tiles' ``rgba`` that cover (y, x), tiles in row-major order
+    (canvas pixel y is row y - 8 ty of tiles ty = y // 8 - 1 and y // 8); every canvas pixel is written."""
+    ch, y, x = wp.tid()
+    channels = canvas.shape[0]
+    acc = float(0.0)
+    for ty in range(y // 8 - 1, y // 8 + 1):
+        for tx in range(x // 8 - 1, x // 8 + 1):
+            if ty >= 0 and ty < tiles_y and tx >= 0 and tx < tiles_x:
+                tile = ty * tiles_x + tx
+                if finite[tile]:
+                    acc += rgba[tile * channels + ch, y - 8 * ty, x - 8 * tx]
+    canvas[ch, y, x] = acc

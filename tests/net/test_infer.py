@@ -16,7 +16,7 @@ def test_processor_layers_reach_the_network_without_a_copy(device, monkeypatch):
     tp = TileProcessor(H, W, device=device)
     frames = torch.from_numpy(np.random.default_rng(0).uniform(0, 1000, (4, H, W)).astype(np.float32))
     out = tp.process(frames.to(tp.torch_device), 1.0)
-    assert out.layers.data_ptr() == tp._layers.ptr and out.layers.device == tp.torch_device
+    assert out.layers.data_ptr() == tp._buffers.layers.ptr and out.layers.device == tp.torch_device
     model = TPNet().to(tp.torch_device)
     target = torch.full((H // 8, W // 8), 1.0, device=tp.torch_device)
 

@@ -1,0 +1,150 @@
+"""Every device array of a tile processor and its zero-copy torch view, allocated once (tile_processor.md §1).
+
+``Buffers`` owns the per-frame buffers (staging, padded frames, targets, CLT tiles, correlations, layers,
+textures) and the constant tables the kernels read, all uploaded from ``tpnet_gpu.operators``/``tables``. Both
+backends work on these arrays: Warp through the ``wp.array``s, Taichi through the torch views (bool masks as
+uint8 views). ``TileResult`` is the set of output views a processor returns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import warp as wp
+
+from tpnet_gpu import operators, tables
+from tpnet_gpu.config import CorrelationConfig, TextureConfig
+from tpnet_gpu.layout import CORR_RADIUS, CORR_SIDE, DTT_SIZE, NET_LAYERS, NET_SIDE, PAD, TILE_SIZE, TILE_STRIDE
+from tpnet_gpu.processor.validate import Geometry
+
+
+@dataclass(frozen=True)
+class TileResult:
+    """Outputs of one ``TileProcessor`` pass (views of the processor's buffers, overwritten by the next pass).
+
+    Attributes:
+        clt: ``(tiles, cams, colours, 4, 8, 8)`` frequency-domain tiles (CC, SC, CS, SS; colours R, B, G).
+            Stale for inactive tiles, zero-filled windows where pixels were not finite.
+        corr: ``(tiles, pairs, 15, 15)`` pair correlations, row = vertical lag + 7; zero where not computed.
+        layers: ``(tiles, 4, 9, 9)`` network layers [hor, vert, diag-main, diag-other], or None unless the
+            pairs are the quad's 6.
+        valid: ``(tiles,)`` bool: active, every centre and window pixel finite, and every window wholly inside
+            the image. Tiles with windows partly off the image still get values computed from pair-clamped
+            pixels; tiles with non-finite input or inactive tiles get zero correlations.
+        centres: ``(tiles, cams, 2)`` the per-camera tile centres (x, y) used, pixels.
+        texture: ``(4, H, W)`` R, G, B, alpha (mono: ``(2, H, W)`` Y, alpha) overlap-added textures of the
+            tiles with finite input, or None unless the processor was built with ``textures=True``. Colours are
+            x ``output_gain`` (raw units); alpha ~1 where the cameras agree, ~0 where they do not or where no
+            tile contributed (an empty texture is all zero).
+    """
+
+    clt: torch.Tensor
+    corr: torch.Tensor
+    layers: torch.Tensor | None
+    valid: torch.Tensor
+    centres: torch.Tensor
+    texture: torch.Tensor | None
+
+
+class Buffers:
+    """Device arrays of one processor (Warp) with their torch views; see the module docstring.
+
+    Per-frame arrays (shapes): ``frames`` (cams, H, W) input staging; ``padded`` (cams, H + 2 PAD, W + 2 PAD);
+    ``disparity`` (tiles_y, tiles_x); ``centres`` (tiles, cams, 2); ``active``, ``all_active``, ``finite``,
+    ``valid`` (tiles,) bool; ``clt`` (tiles * cams * colours * 4, 8, 8); ``corr`` (tiles * pairs, 15, 15);
+    ``layers`` (tiles, 4, 9, 9) or None. Texture (``textures=True``): ``tex_pix``, ``tex_cmp``
+    (tiles * cams * colours, 16, 16), ``tex_weights`` (tiles * cams, 16, 16), ``tex_rgba``
+    (tiles * (colours + 1), 16, 16) per-tile contributions, ``canvas`` (colours + 1, H + 8, W + 8).
+    """
+
+    def __init__(self, geo: Geometry, config: CorrelationConfig, texture_config: TextureConfig | None,
+                 kernels: np.ndarray | None, device: wp.Device):
+        self.device = device
+        self.torch_device = torch.device(wp.device_to_torch(device))
+        cams, tiles, colours, npairs = geo.cams, geo.tiles, geo.colours, len(geo.pairs)
+        zeros = self._zeros
+        self.frames = zeros((cams, geo.height, geo.width))
+        self.padded = zeros((cams, geo.height + 2 * PAD, geo.width + 2 * PAD))
+        self.disparity = zeros((geo.tiles_y, geo.tiles_x))
+        self.active = wp.ones(tiles, dtype=wp.bool, device=device)
+        self.all_active = wp.ones(tiles, dtype=wp.bool, device=device)
+        self.centres = zeros((tiles, cams, 2))
+        self.clt = zeros((tiles * cams * colours * 4, DTT_SIZE, DTT_SIZE))
+        self.finite = wp.zeros(tiles, dtype=wp.bool, device=device)
+        self.valid = wp.zeros(tiles, dtype=wp.bool, device=device)
+        self.corr = zeros((tiles * npairs, CORR_SIDE, CORR_SIDE))
+        self.layers = zeros((tiles, NET_LAYERS, NET_SIDE, NET_SIDE)) if geo.pairs == tables.QUAD_PAIRS else None
+        self._tables(geo, config, kernels)
+        texture_view = None if texture_config is None else self._texture(geo, texture_config)
+        t = wp.to_torch
+        self.result = TileResult(
+            clt=t(self.clt).view(tiles, cams, colours, 4, DTT_SIZE, DTT_SIZE),
+            corr=t(self.corr).view(tiles, npairs, CORR_SIDE, CORR_SIDE),
+            layers=None if self.layers is None else t(self.layers),
+            valid=t(self.valid),
+            centres=t(self.centres),
+            texture=texture_view,
+        )
+        self.frames_t, self.disparity_t, self.active_t = t(self.frames), t(self.disparity), t(self.active)
+
+    # --- helpers ---------------------------------------------------------------------------------------------
+    def _zeros(self, shape) -> wp.array:
+        return wp.zeros(shape, dtype=wp.float32, device=self.device)
+
+    def upload(self, data, dtype=wp.float32) -> wp.array:
+        """A constant table on the device (float64 host tables become float32)."""
+        host = np.ascontiguousarray(data, dtype=np.int32 if dtype == wp.int32 else np.float32)
+        return wp.array(host, dtype=dtype, device=self.device)
+
+    def torch(self, array: wp.array) -> torch.Tensor:
+        """Zero-copy torch view of one of these arrays (bool as uint8, as Taichi takes masks)."""
+        view = wp.to_torch(array, requires_grad=False)
+        return view.view(torch.uint8) if view.dtype == torch.bool else view
+
+    # --- constant tables ---------------------------------------------------------------------------------------
+    def _tables(self, geo: Geometry, cfg: CorrelationConfig, kernels: np.ndarray | None) -> None:
+        up = self.upload
+        self.offsets = wp.array(geo.offsets, dtype=wp.vec2f, device=self.device)  # (cams,) vec2
+        self.pairs = up(np.array(geo.pairs), wp.int32)  # (pairs, 2)
+        self.masks = up(operators.colour_masks(geo.cfa).reshape(-1, TILE_SIZE, TILE_SIZE))  # (4 colours, 16, 16)
+        self.use_kernels = kernels is not None
+        k = kernels if kernels is not None else np.zeros((1, 1, 1, 1, 4, DTT_SIZE, DTT_SIZE), np.float32)
+        self.kernel_grid = (k.shape[1], k.shape[2])  # (rows, cols) of the 16-px kernel grid
+        self.kernels = up(k.reshape(-1, DTT_SIZE, DTT_SIZE))
+        # Index tables of the Warp convert kernel's closed-form bases: k (rows) and n (columns) as tiles.
+        k_index, n_index = np.arange(DTT_SIZE), np.arange(TILE_SIZE)
+        self.k_rows = up(np.broadcast_to(k_index[:, None], (DTT_SIZE, TILE_SIZE)))
+        self.n_rows = up(np.broadcast_to(n_index[None, :], (DTT_SIZE, TILE_SIZE)))
+        self.n_cols = up(np.broadcast_to(n_index[:, None], (TILE_SIZE, DTT_SIZE)))
+        self.k_cols = up(np.broadcast_to(k_index[None, :], (TILE_SIZE, DTT_SIZE)))
+        self.colour_weights = up(cfg.colour_weights)  # (colours,)
+        self.lpf_rb, self.lpf_corr = up(tables.lpf(cfg.sigma_rb)), up(tables.lpf(cfg.sigma_corr))  # (8, 8)
+        lags = operators.lag_operators(CORR_RADIUS)  # (2, 15, 8)
+        self.lags_cos, self.lags_sin = up(lags[0]), up(lags[1])
+        self.freqs_cos, self.freqs_sin = up(lags[0].T), up(lags[1].T)  # (8, 15)
+        index, sign = operators.unfold_gather(CORR_RADIUS)
+        self.dtt2e = up(operators.half_dtt2e())  # (2, 8, 8), Taichi's inverse as 8-point products
+        self.unfold_index, self.unfold_sign = up(index, wp.int32), up(sign)  # (2, 15)
+
+    def _texture(self, geo: Geometry, tc: TextureConfig) -> torch.Tensor:
+        """Texture buffers and tables; returns the image view ``(colours + 1, H, W)`` of the canvas."""
+        n = geo.tiles * geo.cams * geo.colours
+        side = (TILE_SIZE, TILE_SIZE)
+        self.tex_pix, self.tex_cmp = self._zeros((n, *side)), self._zeros((n, *side))
+        self.tex_weights = self._zeros((geo.tiles * geo.cams, *side))
+        self.tex_rgba = self._zeros((geo.tiles * (geo.colours + 1), *side))
+        margin = TILE_STRIDE // 2  # tile (0, 0)'s window starts 4 px before the frame
+        self.canvas = self._zeros((geo.colours + 1, geo.height + 2 * margin, geo.width + 2 * margin))
+        up = self.upload
+        self.tex_lpf = up(np.stack([tables.lpf(s) for s in tc.lpf_sigmas]))  # (colours, 8, 8)
+        inverse = operators.inverse_axes()  # (2, 16, 8)
+        self.inv_cos, self.inv_sin = up(inverse[0]), up(inverse[1])
+        self.inv_cos_t, self.inv_sin_t = up(inverse[0].T), up(inverse[1].T)
+        self.window2 = up(operators.window_squared())  # (16, 16)
+        self.tex_weights_c = up(tc.colour_weights)  # (colours,)
+        # Output channels in R, G, B order (internal colour order is R, B, G).
+        self.channel_of_colour = up([0, 2, 1] if geo.colours == 3 else [0], wp.int32)
+        self.canvas_t = wp.to_torch(self.canvas)
+        return self.canvas_t[:, margin : margin + geo.height, margin : margin + geo.width]

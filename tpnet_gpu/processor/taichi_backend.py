@@ -1,0 +1,92 @@
+"""The Taichi backend: launches of kernels/taichi_*.py over ``Buffers``, spread over every CPU core.
+
+The kernels read and write the processor's own arrays through zero-copy torch views (``ti.types.ndarray``;
+bool masks as uint8 views), so results, layouts and tables are those of the Warp backend. Taichi has one runtime
+per process (arch, threads, compiled kernels): launches are serialised, the processor's arch is made current,
+and on CUDA the kernels wait for torch's stream before and Taichi is synchronised after. Imported only when a
+processor is built with ``backend="taichi"``.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import torch
+
+from tpnet_gpu import tables, taichi_setup
+from tpnet_gpu.config import CorrelationConfig, TextureConfig
+from tpnet_gpu.kernels import taichi_convert, taichi_correlate, taichi_frames, taichi_texture
+from tpnet_gpu.processor.buffers import Buffers
+from tpnet_gpu.processor.validate import Geometry
+
+_TAICHI_LOCK = threading.Lock()
+
+
+class TaichiBackend:
+    """Taichi launches of one processor's steps (see the module docstring)."""
+
+    name = "taichi"
+
+    def __init__(self, geo: Geometry, config: CorrelationConfig, texture_config: TextureConfig | None,
+                 buffers: Buffers):
+        self.geo, self.config, self.texture_config, self.b = geo, config, texture_config, buffers
+        self.cuda = buffers.device.is_cuda
+        self.arch = "cuda" if self.cuda else "cpu"
+        taichi_setup.init_taichi(self.arch)
+        self.t = {}  # Warp array id -> its torch view, made once
+        self.frames_t = buffers.frames_t
+
+    def _v(self, array) -> torch.Tensor:
+        view = self.t.get(id(array))
+        if view is None:
+            view = self.t[id(array)] = self.b.torch(array)
+        return view
+
+    def run(self, steps: tuple[str, ...], *, frames: torch.Tensor | None, masked: bool) -> None:
+        with _TAICHI_LOCK:
+            taichi_setup.use_arch(self.arch)
+            if self.cuda:
+                torch.cuda.current_stream(self.b.torch_device).synchronize()
+            for step in steps:
+                if step == "pad":
+                    taichi_frames.pad_frames(self.frames_t if frames is None else frames, self._v(self.b.padded))
+                elif step == "convert":
+                    self._convert(masked)
+                else:
+                    getattr(self, "_" + step)()
+            if self.cuda:
+                taichi_setup.ti.sync()
+
+    def _centres(self) -> None:
+        b = self.b
+        taichi_frames.ideal_tile_centres(self._v(b.disparity), self._v(b.offsets), self._v(b.centres))
+
+    def _convert(self, masked: bool) -> None:
+        b, geo, v = self.b, self.geo, self._v
+        taichi_convert.convert_tiles(
+            v(b.padded), v(b.centres), v(b.active if masked else b.all_active), v(b.masks), v(b.kernels),
+            b.kernel_grid[0], b.kernel_grid[1], int(b.use_kernels), geo.height, geo.width, geo.colours,
+            v(b.clt), v(b.finite), v(b.valid),
+        )
+
+    def _correlate(self) -> None:
+        b, geo, cfg, v = self.b, self.geo, self.config, self._v
+        taichi_correlate.correlate_tiles(
+            v(b.clt), v(b.finite), v(b.pairs), geo.cams, geo.colours, v(b.colour_weights), cfg.fat_zero,
+            v(b.lpf_rb), v(b.lpf_corr), v(b.dtt2e), v(b.unfold_index), v(b.unfold_sign), v(b.corr),
+        )
+        if b.layers is not None:
+            taichi_correlate.network_layers(v(b.corr), cfg.net_offset, v(b.layers))
+
+    def _texture(self) -> None:
+        b, geo, tc, v = self.b, self.geo, self.texture_config, self._v
+        taichi_texture.texture_imclt(v(b.clt), v(b.finite), geo.cams, geo.colours, v(b.tex_lpf), v(b.inv_cos),
+                                     v(b.inv_sin), v(b.tex_pix))
+        taichi_texture.texture_demosaic(v(b.tex_pix), v(b.finite), geo.cams, geo.colours, tc.scale_shot,
+                                        tc.min_shot, v(b.window2), v(b.tex_cmp))
+        taichi_texture.texture_combine(
+            v(b.tex_pix), v(b.tex_cmp), v(b.finite), geo.tiles_x, geo.tiles_y, geo.cams, geo.colours,
+            v(b.offsets), v(b.tex_weights_c), v(b.channel_of_colour), tc.diff_sigma, tables.TEXTURE_WEIGHT_FLOOR,
+            int(tc.dust_remove), tc.output_gain, v(b.window2), v(b.tex_weights), v(b.tex_rgba),
+        )
+        taichi_texture.overlap_add(v(b.tex_rgba), v(b.finite), geo.tiles_x, geo.tiles_y, v(b.canvas))

@@ -1,0 +1,198 @@
+"""``TileProcessor``: the public host object of the tile processor (tile_processor.md §1, §8).
+
+Built once for (frame size, cameras, pairs, colours, kernels, device, backend): validates its arguments
+(``validate``), allocates every buffer (``Buffers``) and picks a backend (Warp or Taichi). Per frame it only
+maps or copies the inputs into those buffers and has the backend launch. A frame is loaded once (``load``:
+staging and padding) and can then be measured at any number of targets (``measure``), as the pipeline's passes
+do; ``process`` is load + measure (+ texture) in one call. Results are zero-copy torch views of the buffers on
+the processor's device, overwritten by the next call (clone them to keep a frame's results).
+"""
+
+from __future__ import annotations
+
+import torch
+import warp as wp
+
+from tpnet_gpu import tables
+from tpnet_gpu.config import CorrelationConfig, TextureConfig
+from tpnet_gpu.processor import validate
+from tpnet_gpu.processor.buffers import Buffers, TileResult
+from tpnet_gpu.processor.warp_backend import WarpBackend
+from tpnet_gpu.warp_setup import default_device, init_warp
+
+
+class TileProcessor:
+    """Tile processor for frames of ``height`` x ``width`` pixels (multiples of 8, at least 16).
+
+    Args:
+        height, width: frame size in pixels.
+        camera_offsets: ``(cams, 2)`` offsets r_i of the cameras from the virtual centre camera in baselines
+            (x right, y down); camera i sees a tile at c - d r_i. Default: the ideal quad.
+        pairs: camera pairs (first, second) to correlate; default the quad's 6 in the spec's order.
+        cfa: 2x2 Bayer pattern of the raw frames ("GRBG", "RGGB", "BGGR", "GBRG"), or None for mono.
+        kernels: optional aberration kernels in CLT form, ``(cams, colours, 4, 8, 8)`` (one per camera and
+            colour) or ``(cams, rows, cols, colours, 4, 8, 8)`` on the 16-px kernel grid (node n at 16 n - 8).
+        config: correlation parameters.
+        textures: also make the RGBA texture image in ``process`` (allocates its buffers).
+        texture_config: texture parameters.
+        graph: record each step sequence's launches once as a Warp graph (a CUDA graph on the GPU) and replay
+            it for every later call; inputs are then always staged into the processor's buffers. Default: on
+            CUDA with the Warp backend only (plain launches on the CPU). Warp only.
+        device: Warp device ("cpu", "cuda", "cuda:0"); default cuda when present.
+        backend: kernel language, "warp" or "taichi" (``kernels/taichi_*.py``: the same math, inputs and
+            outputs; on the CPU it spreads the tiles over every core, see ``tpnet_gpu.taichi_setup`` for the
+            thread count and the offline cache). Default (None): the faster by measurement (bench_throughput,
+            README): Taichi on the CPU (3.1x Warp's speed for a full frame on 2 cores), Warp on CUDA and
+            wherever ``graph`` is asked for.
+    """
+
+    def __init__(
+        self,
+        height: int,
+        width: int,
+        *,
+        camera_offsets=tables.QUAD_OFFSETS,
+        pairs=tables.QUAD_PAIRS,
+        cfa: str | None = tables.DEFAULT_CFA,
+        kernels=None,
+        config: CorrelationConfig = CorrelationConfig(),
+        textures: bool = False,
+        texture_config: TextureConfig = TextureConfig(),
+        graph: bool | None = None,
+        device: str | None = None,
+        backend: str | None = None,
+    ):
+        geo = validate.geometry(height, width, camera_offsets, pairs, cfa)
+        validate.backend(backend, graph)
+        init_warp()
+        self.device = wp.get_device(device or default_device())
+        if backend is None:
+            backend = "warp" if (graph or self.device.is_cuda) else "taichi"
+        if backend == "taichi" and self.device.is_cuda and self.device.ordinal != 0:
+            raise ValueError(f"device: the Taichi backend runs on cpu or cuda:0 only, got {self.device}")
+        self.geometry = geo
+        self.config = config.resolved(geo.colours)
+        self.textures = bool(textures)
+        self.texture_config = texture_config.resolved(geo.colours)
+        self.graph = (self.device.is_cuda and backend == "warp") if graph is None else bool(graph)
+        self._buffers = Buffers(geo, self.config, self.texture_config if self.textures else None,
+                                validate.kernels(kernels, geo), self.device)
+        if backend == "taichi":
+            from tpnet_gpu.processor.taichi_backend import TaichiBackend  # noqa: PLC0415 - Taichi only when asked
+
+            self._backend = TaichiBackend(geo, self.config, self.texture_config, self._buffers)
+        else:
+            self._backend = WarpBackend(geo, self.config, self.texture_config, self._buffers, graph=self.graph)
+        self._masked = False  # the last targets came with an active mask
+        self._ideal = True  # the last targets were disparities (centres computed on the device)
+        if self.device.is_cuda:  # the zero-fills above must finish before a user's side stream writes inputs
+            wp.synchronize_device(self.device)
+
+    # --- what it was built for ---------------------------------------------------------------------------------
+    backend = property(lambda self: self._backend.name, doc='"warp" or "taichi".')
+    torch_device = property(lambda self: self._buffers.torch_device, doc="The torch device of the results.")
+    height = property(lambda self: self.geometry.height)
+    width = property(lambda self: self.geometry.width)
+    tiles_y = property(lambda self: self.geometry.tiles_y)
+    tiles_x = property(lambda self: self.geometry.tiles_x)
+    tiles = property(lambda self: self.geometry.tiles)
+    cams = property(lambda self: self.geometry.cams)
+    colours = property(lambda self: self.geometry.colours)
+    pairs = property(lambda self: self.geometry.pairs)
+    cfa = property(lambda self: self.geometry.cfa)
+
+    @property
+    def result(self) -> TileResult:
+        """The output views (what ``process`` returns), as the stages last left them."""
+        return self._buffers.result
+
+    # --- per frame ---------------------------------------------------------------------------------------------
+    def load(self, frames) -> None:
+        """Map or copy one set of camera frames and pad them (pair clamp); later ``measure`` calls read them.
+
+        Args:
+            frames: ``(cams, height, width)`` raw frames (Bayer mosaics in ``cfa``, or mono), torch tensor on any
+                device or numpy array, any real dtype. A float32 contiguous tensor on the processor's device is
+                read in place (without graphs); anything else is copied into the processor's staging buffer.
+        """
+        frames = validate.frames(frames, self.geometry)
+        b = self._buffers
+        in_place = (not self.graph and frames.dtype == torch.float32 and frames.device == b.torch_device
+                    and frames.is_contiguous())
+        if not in_place:
+            b.frames_t.copy_(frames)  # converts dtype and device
+        self._backend.run(("pad",), frames=frames if in_place else None, masked=False)
+
+    def set_targets(self, target_disparity=None, *, centres=None, active=None) -> None:
+        """Copy one pass's targets into the processor's buffers (see ``measure`` for the arguments)."""
+        validate.targets(target_disparity, centres)
+        geo, b = self.geometry, self._buffers
+        mask = validate.active(active, geo)
+        if centres is None:
+            target = validate.target_disparity(target_disparity, geo)
+            if isinstance(target, float):
+                b.disparity_t.fill_(target)
+            else:
+                b.disparity_t.copy_(target)
+        else:
+            b.result.centres.copy_(validate.centres(centres, geo))
+        if mask is not None:
+            b.active_t.copy_(mask)
+        elif self.graph:  # a recorded graph reads one fixed mask buffer
+            b.active_t.fill_(True)
+        self._masked = mask is not None or self.graph
+        self._ideal = centres is None
+
+    def measure(self, target_disparity=None, *, centres=None, active=None) -> TileResult:
+        """Convert and correlate the loaded frames at new targets.
+
+        Args:
+            target_disparity: a number or ``(tiles_y, tiles_x)`` target disparities (px) of the ideal rig;
+                NaN masks the tile. Give this or ``centres``.
+            centres: ``(tiles, cams, 2)`` per-camera tile centres (x, y) in pixels, e.g. from a calibrated
+                camera model; NaN masks the tile.
+            active: optional ``(tiles_y, tiles_x)`` bool mask of tiles to process.
+
+        Returns:
+            TileResult of torch tensors on the processor's device (views, overwritten by the next call).
+        """
+        self.set_targets(target_disparity, centres=centres, active=active)
+        self._run(("convert", "correlate"))
+        return self.result
+
+    def process(self, frames, target_disparity=None, *, centres=None, active=None) -> TileResult:
+        """``load`` + ``measure`` of one set of frames, and the texture when built with ``textures=True``."""
+        validate.targets(target_disparity, centres)
+        self.load(frames)
+        self.set_targets(target_disparity, centres=centres, active=active)
+        self._run(("convert", "correlate", "texture") if self.textures else ("convert", "correlate"))
+        return self.result
+
+    def _run(self, steps: tuple[str, ...]) -> None:
+        if self._ideal and "convert" in steps:
+            steps = ("centres", *steps)
+        self._backend.run(steps, frames=None, masked=self._masked)
+
+    # --- stages (public so benchmarks can time them; ``process`` runs them in order) ----------------------------
+    def prepare(self, frames, target_disparity=None, *, centres=None, active=None) -> None:
+        """Stage 0: ``load`` the frames, set the targets and compute the tile centres."""
+        validate.targets(target_disparity, centres)
+        self.load(frames)
+        self.set_targets(target_disparity, centres=centres, active=active)
+        if self._ideal:
+            self._backend.run(("centres",), frames=None, masked=self._masked)
+        self._ideal = False  # the centres are now in place for convert
+
+    def convert(self) -> None:
+        """Stage 1: padded frames and centres -> CLT tiles, finite and valid masks."""
+        self._run(("convert",))
+
+    def correlate(self) -> None:
+        """Stage 2: CLT tiles -> pair correlations (and the network layers for the quad's pairs)."""
+        self._run(("correlate",))
+
+    def texture(self) -> None:
+        """Stage 3: CLT tiles -> RGBA texture image (needs ``textures=True`` at construction)."""
+        if not self.textures:
+            raise RuntimeError("texture: this processor was built without textures=True")
+        self._run(("texture",))

@@ -1,0 +1,158 @@
+"""Pure input validators of the tile processor: each checks one argument at the public boundary and raises a
+``ValueError``/``TypeError`` that names the argument, what was expected and what came. No device work."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from tpnet_gpu import tables
+from tpnet_gpu.layout import DTT_SIZE, TILE_SIZE, TILE_STRIDE
+
+BACKENDS = ("warp", "taichi")
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """What a processor is built for: frame size, cameras, pairs and colours (validated)."""
+
+    height: int
+    width: int
+    offsets: np.ndarray  # (cams, 2) float32, baselines (x right, y down)
+    pairs: tuple[tuple[int, int], ...]
+    cfa: str | None
+
+    @property
+    def tiles_y(self) -> int:
+        return self.height // TILE_STRIDE
+
+    @property
+    def tiles_x(self) -> int:
+        return self.width // TILE_STRIDE
+
+    @property
+    def tiles(self) -> int:
+        return self.tiles_y * self.tiles_x
+
+    @property
+    def cams(self) -> int:
+        return self.offsets.shape[0]
+
+    @property
+    def colours(self) -> int:
+        return 1 if self.cfa is None else 3
+
+
+def frame_size(name: str, value) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < TILE_SIZE or value % DTT_SIZE:
+        raise ValueError(f"{name}: expected a multiple of {DTT_SIZE} that is at least {TILE_SIZE}, got {value!r}")
+    return int(value)
+
+
+def camera_offsets(offsets) -> np.ndarray:
+    out = np.asarray(offsets, dtype=np.float32)
+    if out.ndim != 2 or out.shape[1] != 2 or out.shape[0] < 2:
+        raise ValueError(f"camera_offsets: expected shape (cams >= 2, 2), got {out.shape}")
+    return out
+
+
+def pairs(value, cams: int) -> tuple[tuple[int, int], ...]:
+    out = tuple((int(a), int(b)) for a, b in value)
+    if not out:
+        raise ValueError("pairs: expected at least one (first, second) camera pair, got none")
+    for a, b in out:
+        if not (0 <= a < cams and 0 <= b < cams) or a == b:
+            raise ValueError(f"pairs: expected distinct camera indices in 0..{cams - 1}, got {(a, b)}")
+    return out
+
+
+def geometry(height, width, offsets, pair_list, cfa) -> Geometry:
+    """All of the processor's shape arguments, checked."""
+    height, width = frame_size("height", height), frame_size("width", width)
+    offsets = camera_offsets(offsets)
+    if cfa is not None:
+        tables.cfa_red_position(cfa)  # names the allowed patterns
+    return Geometry(height, width, offsets, pairs(pair_list, offsets.shape[0]), cfa)
+
+
+def backend(name, graph) -> None:
+    if name is not None and name not in BACKENDS:
+        raise ValueError(f"backend: expected one of {BACKENDS} or None, got {name!r}")
+    if name == "taichi" and graph:
+        raise ValueError("graph: graph capture records Warp launches; it needs backend='warp', got backend='taichi'")
+
+
+def kernels(value, geo: Geometry) -> np.ndarray | None:
+    """Aberration kernels ``(cams, rows, cols, colours, 4, 8, 8)`` float32 (a 5-D per-camera set gets a 1x1 grid),
+    or None."""
+    if value is None:
+        return None
+    k = value.detach().cpu().numpy() if isinstance(value, torch.Tensor) else np.asarray(value)
+    expected = f"(cams={geo.cams}, [rows, cols,] colours={geo.colours}, 4, 8, 8)"
+    if k.ndim == 5:
+        k = k[:, None, None]
+    if k.ndim != 7 or k.shape[0] != geo.cams or k.shape[3:] != (geo.colours, 4, DTT_SIZE, DTT_SIZE):
+        raise ValueError(f"kernels: expected shape {expected}, got {tuple(k.shape)}")
+    if not np.all(np.isfinite(k)):
+        raise ValueError("kernels: expected finite values, got NaN or infinity")
+    return np.ascontiguousarray(k, dtype=np.float32)
+
+
+def _tensor(name: str, value, shape: tuple, axes: str, kinds: str) -> torch.Tensor:
+    """``value`` as a torch tensor of ``shape`` (NumPy arrays are wrapped, not copied)."""
+    if isinstance(value, np.ndarray):
+        value = torch.from_numpy(value)
+    if not isinstance(value, torch.Tensor):
+        raise TypeError(f"{name}: expected {kinds}, got {type(value).__name__}")
+    if tuple(value.shape) != shape:
+        raise ValueError(f"{name}: expected shape {shape} ({axes}), got {tuple(value.shape)}")
+    return value
+
+
+def frames(value, geo: Geometry) -> torch.Tensor:
+    """``(cams, height, width)`` real-valued frames as a torch tensor."""
+    value = _tensor("frames", value, (geo.cams, geo.height, geo.width), "cams, height, width",
+                    "a torch tensor or numpy array")
+    if value.dtype.is_complex or value.dtype == torch.bool:
+        raise TypeError(f"frames: expected real pixel values (float or integer), got {value.dtype}")
+    return value
+
+
+def _floating(name: str, value, shape: tuple, axes: str) -> torch.Tensor:
+    value = _tensor(name, value, shape, axes, "a number, torch tensor or numpy array")
+    if not value.dtype.is_floating_point:
+        raise TypeError(f"{name}: expected a floating-point dtype, got {value.dtype}")
+    return value
+
+
+def target_disparity(value, geo: Geometry) -> float | torch.Tensor:
+    """A number or a ``(tiles_y, tiles_x)`` floating-point tensor of target disparities."""
+    if isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool):
+        return float(value)
+    return _floating("target_disparity", value, (geo.tiles_y, geo.tiles_x), "tiles_y, tiles_x")
+
+
+def centres(value, geo: Geometry) -> torch.Tensor:
+    """``(tiles, cams, 2)`` floating-point per-camera tile centres."""
+    if isinstance(value, (int, float)):
+        raise TypeError(f"centres: expected a torch tensor or numpy array, got {type(value).__name__}")
+    return _floating("centres", value, (geo.tiles, geo.cams, 2), "tiles, cams, x/y")
+
+
+def active(value, geo: Geometry) -> torch.Tensor | None:
+    """None (every tile) or a bool mask of ``tiles`` elements, returned flat."""
+    if value is None:
+        return None
+    if isinstance(value, np.ndarray):
+        value = torch.from_numpy(value)
+    if not isinstance(value, torch.Tensor) or value.dtype != torch.bool or value.numel() != geo.tiles:
+        got = f"{value.dtype} of shape {tuple(value.shape)}" if isinstance(value, torch.Tensor) else type(value)
+        raise ValueError(f"active: expected a bool mask of {geo.tiles} tiles (tiles_y, tiles_x), got {got}")
+    return value.reshape(-1)
+
+
+def targets(disparity, centre_list) -> None:
+    if (disparity is None) == (centre_list is None):
+        raise ValueError("process: give exactly one of target_disparity and centres")

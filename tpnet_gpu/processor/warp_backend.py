@@ -1,0 +1,146 @@
+"""The Warp backend: launches of kernels/frames.py, convert.py, correlate.py, texture.py over ``Buffers``.
+
+Streams and graphs (CUDA): launches go to torch's current stream, through one Warp stream wrapper per torch
+stream, so torch's copies and readers are ordered with the kernels. A step sequence is recorded as a CUDA graph
+once, on a private Warp stream - capture is illegal on the legacy default stream that torch normally uses - and
+replayed with ``wp.capture_launch(graph, stream=<torch's stream>)``. Every launch on CUDA, tiled or per thread,
+uses ``CUDA_BLOCK_DIM``: Warp compiles a module once per block size, so one size means one build per module.
+On the CPU a block is one lane and a "graph" is Warp's recorded launches.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+
+import torch
+import warp as wp
+
+from tpnet_gpu import tables
+from tpnet_gpu.config import CorrelationConfig, TextureConfig
+from tpnet_gpu.kernels import convert, correlate, frames, texture
+from tpnet_gpu.layout import CPU_BLOCK_DIM, CUDA_BLOCK_DIM
+from tpnet_gpu.processor.buffers import Buffers
+from tpnet_gpu.processor.validate import Geometry
+
+# Warp's CPU tile kernels share one scratch arena: two concurrent launches abort the process (platform.md §1).
+_CPU_LAUNCH_LOCK = threading.Lock()
+KERNEL_MODULES = (frames, convert, correlate, texture)
+
+
+class WarpBackend:
+    """Warp launches of one processor's steps (see the module docstring)."""
+
+    name = "warp"
+
+    def __init__(self, geo: Geometry, config: CorrelationConfig, texture_config: TextureConfig | None,
+                 buffers: Buffers, *, graph: bool):
+        self.geo, self.config, self.texture_config, self.b = geo, config, texture_config, buffers
+        self.device = buffers.device
+        self.block_dim = CUDA_BLOCK_DIM if self.device.is_cuda else CPU_BLOCK_DIM
+        self.graph = graph
+        self.graphs: dict[tuple[str, ...], wp.Graph] = {}  # steps -> recorded launches
+        self._streams: dict[int, wp.Stream] = {}  # torch stream handle -> its Warp wrapper
+        self._capture_stream = wp.Stream(self.device) if graph and self.device.is_cuda else None
+        self._lock = _CPU_LAUNCH_LOCK if self.device.is_cpu else threading.Lock()
+
+    # --- streams and graphs --------------------------------------------------------------------------------
+    def _torch_stream(self) -> wp.Stream | None:
+        """The Warp wrapper of torch's current stream (one per torch stream), None on the CPU."""
+        if not self.device.is_cuda:
+            return None
+        current = torch.cuda.current_stream(self.b.torch_device)
+        stream = self._streams.get(current.cuda_stream)
+        if stream is None:
+            stream = self._streams[current.cuda_stream] = wp.stream_from_torch(current)
+        return stream
+
+    def _record(self, steps: tuple[str, ...], frames_t, masked: bool) -> wp.Graph:
+        for module in KERNEL_MODULES:  # compiled before capture, at the one block size launches use
+            wp.load_module(module, device=self.device, block_dim=self.block_dim)
+        stream = self._capture_stream
+        scope = wp.ScopedStream(stream, sync_enter=False) if stream is not None else contextlib.nullcontext()
+        with scope, wp.ScopedCapture(device=self.device, stream=stream, force_module_load=False) as capture:
+            self._launch(steps, frames_t, masked)
+        return capture.graph
+
+    def run(self, steps: tuple[str, ...], *, frames: torch.Tensor | None, masked: bool) -> None:
+        with self._lock:
+            stream = self._torch_stream()
+            if self.graph:
+                if frames is not None:
+                    raise RuntimeError("graph replay reads the processor's staging buffer; stage the frames first")
+                if steps not in self.graphs:
+                    self.graphs[steps] = self._record(steps, None, masked)
+                wp.capture_launch(self.graphs[steps], stream=stream)
+                return
+            scope = wp.ScopedStream(stream, sync_enter=False) if stream is not None else contextlib.nullcontext()
+            with scope:
+                self._launch(steps, frames, masked)
+
+    # --- launches --------------------------------------------------------------------------------------------
+    def _launch(self, steps: tuple[str, ...], frames_t, masked: bool) -> None:
+        for step in steps:
+            if step == "pad":
+                self._pad(frames_t)
+            elif step == "convert":
+                self._convert(masked)
+            else:
+                getattr(self, "_" + step)()
+
+    def _thread_launch(self, kernel, dim, inputs, outputs) -> None:
+        wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=self.device, block_dim=self.block_dim)
+
+    def _tile_launch(self, kernel, inputs, outputs) -> None:
+        wp.launch_tiled(kernel, dim=[self.geo.tiles], inputs=inputs, outputs=outputs, block_dim=self.block_dim,
+                        device=self.device)
+
+    def _pad(self, frames_t: torch.Tensor | None) -> None:
+        b = self.b
+        source = b.frames if frames_t is None else wp.from_torch(frames_t, requires_grad=False)
+        self._thread_launch(frames.pad_frames, b.padded.shape, [source], [b.padded])
+
+    def _centres(self) -> None:
+        b, geo = self.b, self.geo
+        self._thread_launch(frames.ideal_tile_centres, (geo.tiles_y, geo.tiles_x, geo.cams), [b.disparity, b.offsets],
+                            [b.centres])
+
+    def _convert(self, masked: bool) -> None:
+        b, geo = self.b, self.geo
+        self._tile_launch(
+            convert.convert_tiles,
+            [b.padded, b.centres, b.active if masked else b.all_active, b.masks, b.k_rows, b.n_rows, b.n_cols,
+             b.k_cols, b.kernels, b.kernel_grid[0], b.kernel_grid[1], b.use_kernels, geo.height, geo.width,
+             geo.colours],
+            [b.clt, b.finite, b.valid],
+        )
+
+    def _correlate(self) -> None:
+        b, geo, cfg = self.b, self.geo, self.config
+        self._tile_launch(
+            correlate.correlate_tiles,
+            [b.clt, b.finite, b.pairs, geo.cams, geo.colours, b.colour_weights, cfg.fat_zero, b.lpf_rb, b.lpf_corr,
+             b.lags_cos, b.lags_sin, b.freqs_cos, b.freqs_sin],
+            [b.corr],
+        )
+        if b.layers is not None:
+            self._thread_launch(correlate.network_layers, b.layers.shape, [b.corr, cfg.net_offset], [b.layers])
+
+    def _texture(self) -> None:
+        b, geo, tc = self.b, self.geo, self.texture_config
+        self._tile_launch(
+            texture.texture_imclt,
+            [b.clt, b.finite, geo.cams, geo.colours, b.tex_lpf, b.inv_cos, b.inv_sin, b.inv_cos_t, b.inv_sin_t],
+            [b.tex_pix],
+        )
+        self._thread_launch(texture.texture_demosaic, b.tex_pix.shape,
+                            [b.tex_pix, b.finite, geo.cams, geo.colours, tc.scale_shot, tc.min_shot], [b.tex_cmp])
+        self._thread_launch(
+            texture.texture_combine, (geo.tiles, *b.tex_pix.shape[1:]),
+            [b.tex_pix, b.tex_cmp, b.finite, geo.tiles_x, geo.tiles_y, geo.cams, geo.colours, b.offsets,
+             b.tex_weights_c, b.channel_of_colour, tc.diff_sigma, tables.TEXTURE_WEIGHT_FLOOR, tc.dust_remove,
+             tc.output_gain],
+            [b.tex_weights, b.tex_rgba],
+        )
+        self._thread_launch(texture.overlap_add, b.canvas.shape, [b.tex_rgba, b.finite, geo.tiles_x, geo.tiles_y],
+                            [b.canvas])
