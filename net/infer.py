@@ -11,6 +11,7 @@ from pathlib import Path
 
 import torch
 
+from tpnet_gpu.config import CorrelationConfig, DatasetSpec
 from tpnet_gpu.net.model import TPNet
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
@@ -37,9 +38,6 @@ def correlation(path=None):
     """The tile processor's correlation settings the weights at ``path`` were trained on (their recipe's data
     set: colour weights and fat zero); the layers the network reads must be made with these. Weights without
     a recipe are taken to come from today's data set (``DatasetSpec()``)."""
-    from tpnet_gpu.config import CorrelationConfig  # noqa: PLC0415
-    from tpnet_gpu.dataset import DatasetSpec  # noqa: PLC0415
-
     path = Path(path) if path is not None else DEFAULT_WEIGHTS
     if not path.with_suffix(".json").exists():
         return DatasetSpec().correlation()

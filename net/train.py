@@ -18,39 +18,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from tpnet_gpu.config import TrainConfig  # noqa: F401 - re-exported: the training settings live in config
 from tpnet_gpu.net.losses import main_loss, mirror_loss_frame, weights_loss
 from tpnet_gpu.net.model import TPNet
 
 PARTIAL_WEIGHTS = (2.0, 0.5, 0.2)
 LR_STEPS = ((0.0, 3e-4), (0.15, 1e-4), (0.3, 3e-5), (0.6, 1e-5), (0.9, 3e-6))  # (fraction of epochs, lr), §7
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    """Training settings. ``epochs`` passes over the training samples (scenes x variants), ``batch`` samples
-    per step; LR schedule §7 scaled to ``epochs``; ``w_mode`` of the Laplacian regulariser."""
-
-    epochs: int = 60
-    batch: int = 4
-    seed: int = 0
-    max_offset: float = 2.0
-    mirror_lambda: float = 0.1
-    weights_lambda: float = 0.5
-    w_mode: str = "as_coded"
-    hard_share: float = 0.5
-    variants: tuple = ("heuristic", "random", "near0", "near1")
-    # per-variant loss weights (network.md §5.1 BATCH_WEIGHTS, meant but never applied in the original):
-    # random-offset targets teach large corrections; heuristic and near ones the precision near the answer
-    variant_weights: tuple = (1.0, 1.0, 1.0, 1.0)
-    # errors scaled by c / (|target - gt| + c), c = error_scale px (None: plain errors, as the original): the
-    # loss asks for an error proportional to the target's, so both coarse corrections and the precision near
-    # the answer count, and repeated passes converge
-    error_scale: float | None = 0.3
-
-    def __post_init__(self):
-        if len(self.variant_weights) != len(self.variants):
-            raise ValueError(f"variant_weights: expected one weight per variant {self.variants}, "
-                             f"got {self.variant_weights}")
 
 
 def learning_rate(epoch: int, epochs: int) -> float:

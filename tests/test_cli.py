@@ -50,15 +50,15 @@ def test_bench_wrapper_runs_a_script(tmp_path, capsys):
     assert "convert" in capsys.readouterr().out and json_path.exists()
 
 
-def test_backend_choices_are_the_processors():
+def test_command_defaults_are_the_configs():
+    # Oracle: the config dataclasses, the one home of every default (tpnet_gpu/config.py).
     from tpnet_gpu import cli
-    from tpnet_gpu.processor import BACKENDS
+    from tpnet_gpu.config import DatasetSpec, TrainConfig
 
-    assert cli.BACKENDS == BACKENDS
-
-
-def test_train_error_scale_default_is_the_configs():
-    from tpnet_gpu import cli
-    from tpnet_gpu.net.train import TrainConfig
-
-    assert cli.TRAIN_ERROR_SCALE == TrainConfig.error_scale
+    parser = cli.build_parser()
+    data, train = parser.parse_args(["dataset", "out/x"]), parser.parse_args(["train", "out/x"])
+    spec, config = DatasetSpec(), TrainConfig()
+    assert (data.scenes, data.width, data.height, data.seed, data.supersample, data.test_fraction) == (
+        spec.scenes, spec.width, spec.height, spec.seed, spec.supersample, spec.test_fraction)
+    assert (train.epochs, train.batch, train.seed, train.w_mode, train.error_scale) == (
+        config.epochs, config.batch, config.seed, config.w_mode, config.error_scale)

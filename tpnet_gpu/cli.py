@@ -119,8 +119,6 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 BENCHES = ("tp", "accuracy", "network", "throughput")
-TRAIN_ERROR_SCALE = 0.3  # = TrainConfig.error_scale (not imported here: the CLI starts without torch)
-BACKENDS = ("warp", "taichi")  # TileProcessor's backends (not imported here: the CLI starts without Warp)
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -140,6 +138,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from tpnet_gpu.config import BACKENDS, DatasetSpec, TrainConfig  # noqa: PLC0415 - light: numpy only
+
+    spec, train = DatasetSpec(), TrainConfig()
     parser = argparse.ArgumentParser(prog="tpnet", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="the built-in rendered scene through the pipeline: pictures + report")
@@ -178,12 +179,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     data = sub.add_parser("dataset", help="build a training/test set from rendered random scenes")
     data.add_argument("out", help="output folder (existing scene chunks are kept: the build resumes)")
-    data.add_argument("--scenes", type=int, default=40, help="number of scenes")
-    data.add_argument("--width", type=int, default=640, help="frame width, pixels (multiple of 8)")
-    data.add_argument("--height", type=int, default=480, help="frame height, pixels (multiple of 8)")
-    data.add_argument("--test-fraction", type=float, default=0.2, help="share of scenes held out for testing")
-    data.add_argument("--seed", type=int, default=0, help="seed of the scenes and the split")
-    data.add_argument("--supersample", type=int, default=2, help="sub-pixel rays per axis")
+    data.add_argument("--scenes", type=int, default=spec.scenes, help="number of scenes")
+    data.add_argument("--width", type=int, default=spec.width, help="frame width, pixels (multiple of 8)")
+    data.add_argument("--height", type=int, default=spec.height, help="frame height, pixels (multiple of 8)")
+    data.add_argument("--test-fraction", type=float, default=spec.test_fraction,
+                      help="share of scenes held out for testing")
+    data.add_argument("--seed", type=int, default=spec.seed, help="seed of the scenes and the split")
+    data.add_argument("--supersample", type=int, default=spec.supersample, help="sub-pixel rays per axis")
     data.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     data.set_defaults(func=_cmd_dataset)
 
@@ -191,14 +193,14 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("data", help="data set folder (from `tpnet dataset`)")
     tr.add_argument("--out", default="out/tpnet.pt", help="final weights (a recipe .json is written beside)")
     tr.add_argument("--checkpoint", default="out/tpnet_checkpoint.pt", help="checkpoint file (resumed if present)")
-    tr.add_argument("--epochs", type=int, default=60)
-    tr.add_argument("--batch", type=int, default=4, help="frames per step")
-    tr.add_argument("--seed", type=int, default=0)
-    tr.add_argument("--w-mode", choices=("as_coded", "isotropic"), default="as_coded",
+    tr.add_argument("--epochs", type=int, default=train.epochs)
+    tr.add_argument("--batch", type=int, default=train.batch, help="frames per step")
+    tr.add_argument("--seed", type=int, default=train.seed)
+    tr.add_argument("--w-mode", choices=("as_coded", "isotropic"), default=train.w_mode,
                     help="Laplacian regulariser of the first layer (network.md §2)")
     tr.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     tr.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
-    tr.add_argument("--error-scale", type=float, default=TRAIN_ERROR_SCALE,
+    tr.add_argument("--error-scale", type=float, default=train.error_scale,
                     help="c (px): errors are scaled by c / (|target - gt| + c); 0: plain errors, as the original")
     tr.add_argument("--random-weight", type=float, default=1.0,
                     help="loss weight of the random-offset (+-2 px) targets relative to the others")

@@ -1,10 +1,21 @@
-"""Parameters of the tile processor (tile_processor.md §6.5, §9). Frozen dataclasses; units in comments."""
+"""Every default of the project in one place: the tile processor's parameters (tile_processor.md §6.5, §9), the
+baseline's correlation, the data set and the training settings. Frozen dataclasses; units in comments."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from tpnet_gpu import tables
+
+BACKENDS = ("warp", "taichi")  # the tile processor's kernel languages
+NEAR_DRAWS = 2  # "near" training targets per scene (ground truth + a small log-uniform offset)
+
+
+def target_variants(near_draws: int = NEAR_DRAWS) -> tuple[str, ...]:
+    """Names of the training-target variants: the baseline's, a random +-2 px offset, and the near draws."""
+    return ("heuristic", "random") + tuple(f"near{i}" for i in range(near_draws))
 
 
 @dataclass(frozen=True)
@@ -75,3 +86,79 @@ class TextureConfig:
         return TextureConfig(tuple(map(float, sigmas)), tuple(map(float, weights)), float(self.diff_sigma),
                              float(self.min_shot), float(self.scale_shot), bool(self.dust_remove),
                              float(self.output_gain))
+
+
+# The correlation the baseline measures with (our recommended choice, by measurement): green only. The as-coded
+# mix (R 0.25, B 0.25, G 0.5) skews the phase-correlation peak of Bayer data at fractional per-camera shifts:
+# the zero-filled quarter-density R and B lattices alias, and phase normalisation amplifies their aliased
+# bins. On a rendered plane at 3.3 px the LMA read a residual of +0.18-0.20 px at the true disparity with
+# the as-coded mix and 0.009 with green only; plain correlation (huge fat zero) is unskewed but loses the
+# phase-correlation strength scale the LMA thresholds are set for. The fat zero (absolute, units of the
+# product of two CLT tiles) suits 12-bit raw data near mid-scale: it keeps noise-only frequencies (sky,
+# flat colours) from forming confident peaks (bench_accuracy: low-texture tiles measured 96 % -> 10 %).
+BASELINE_CORRELATION = CorrelationConfig(colour_weights=(0.0, 0.0, 1.0), fat_zero=1.0e4)
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    """What to build: ``scenes`` random scenes of ``width`` x ``height`` (seeded by ``seed`` + index),
+    ``test_fraction`` of them held out (by scene), targets offset by up to ``random_offset`` px."""
+
+    scenes: int = 40
+    width: int = 640
+    height: int = 480
+    test_fraction: float = 0.2
+    seed: int = 0
+    random_offset: float = 2.0
+    supersample: int = 2
+    # the layers' correlation settings, as the baseline's (BASELINE_CORRELATION): green only, fat zero 1e4
+    fat_zero: float = BASELINE_CORRELATION.fat_zero
+    colour_weights: tuple = BASELINE_CORRELATION.colour_weights
+    near_offset: tuple = (0.005, 0.5)
+    near_draws: int = NEAR_DRAWS
+
+    def variants(self) -> tuple:
+        """Names of the target variants each chunk holds."""
+        return target_variants(self.near_draws)
+
+    def correlation(self) -> CorrelationConfig:
+        """The tile processor's correlation settings for the network layers."""
+        return CorrelationConfig(colour_weights=tuple(self.colour_weights), fat_zero=self.fat_zero)
+
+    def split(self) -> list[str]:
+        """'train' / 'test' per scene index, a seeded permutation (at least one test scene when >= 2)."""
+        n_test = int(round(self.scenes * self.test_fraction)) if self.scenes > 1 else 0
+        n_test = max(n_test, 1) if self.scenes > 1 and self.test_fraction > 0 else n_test
+        order = np.random.default_rng(self.seed).permutation(self.scenes)
+        labels = ["train"] * self.scenes
+        for i in order[:n_test]:
+            labels[int(i)] = "test"
+        return labels
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Training settings. ``epochs`` passes over the training samples (scenes x variants), ``batch`` samples
+    per step; LR schedule (network.md §7) scaled to ``epochs``; ``w_mode`` of the Laplacian regulariser."""
+
+    epochs: int = 60
+    batch: int = 4
+    seed: int = 0
+    max_offset: float = 2.0
+    mirror_lambda: float = 0.1
+    weights_lambda: float = 0.5
+    w_mode: str = "as_coded"
+    hard_share: float = 0.5
+    variants: tuple = target_variants()
+    # per-variant loss weights (network.md §5.1 BATCH_WEIGHTS, meant but never applied in the original):
+    # random-offset targets teach large corrections; heuristic and near ones the precision near the answer
+    variant_weights: tuple = (1.0, 1.0, 1.0, 1.0)
+    # errors scaled by c / (|target - gt| + c), c = error_scale px (None: plain errors, as the original): the
+    # loss asks for an error proportional to the target's, so both coarse corrections and the precision near
+    # the answer count, and repeated passes converge
+    error_scale: float | None = 0.3
+
+    def __post_init__(self):
+        if len(self.variant_weights) != len(self.variants):
+            raise ValueError(f"variant_weights: expected one weight per variant {self.variants}, "
+                             f"got {self.variant_weights}")

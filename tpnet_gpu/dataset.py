@@ -18,50 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
-from tpnet_gpu.baseline.estimate import BASELINE_CORRELATION, BaselineParams, estimate, processor_correlator
+from tpnet_gpu.baseline.estimate import BaselineParams, estimate, processor_correlator
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.config import CorrelationConfig
+from tpnet_gpu.config import BASELINE_CORRELATION, DatasetSpec  # noqa: F401 - DatasetSpec re-exported
 from tpnet_gpu.scenes import Sensor, random_scene, render
 
 FORMAT = "tpnet-dataset"
 VERSION = 2
-
-
-@dataclass(frozen=True)
-class DatasetSpec:
-    """What to build: ``scenes`` random scenes of ``width`` x ``height`` (seeded by ``seed`` + index),
-    ``test_fraction`` of them held out (by scene), targets offset by up to ``random_offset`` px."""
-
-    scenes: int = 40
-    width: int = 640
-    height: int = 480
-    test_fraction: float = 0.2
-    seed: int = 0
-    random_offset: float = 2.0
-    supersample: int = 2
-    fat_zero: float = 1.0e4  # as the baseline: keeps noise-only frequencies from dominating the layers
-    # green only, as the baseline: the as-coded colour mix skews peaks at fractional shifts (issue 5 note)
-    colour_weights: tuple = (0.0, 0.0, 1.0)
-    near_offset: tuple = (0.005, 0.5)
-    near_draws: int = 2
-
-    def variants(self) -> tuple:
-        """Names of the target variants each chunk holds."""
-        return ("heuristic", "random") + tuple(f"near{i}" for i in range(self.near_draws))
-
-    def correlation(self) -> CorrelationConfig:
-        """The tile processor's correlation settings for the network layers."""
-        return CorrelationConfig(colour_weights=tuple(self.colour_weights), fat_zero=self.fat_zero)
-
-    def split(self) -> list[str]:
-        """'train' / 'test' per scene index, a seeded permutation (at least one test scene when >= 2)."""
-        n_test = int(round(self.scenes * self.test_fraction)) if self.scenes > 1 else 0
-        n_test = max(n_test, 1) if self.scenes > 1 and self.test_fraction > 0 else n_test
-        order = np.random.default_rng(self.seed).permutation(self.scenes)
-        labels = ["train"] * self.scenes
-        for i in order[:n_test]:
-            labels[int(i)] = "test"
-        return labels
 
 
 def _layers(processor, frames, target) -> np.ndarray:

@@ -90,9 +90,9 @@ class Pipeline:
         self._best_strength = torch.zeros(shape, device=self.device)
         self._best_target = torch.zeros(shape, device=self.device)
 
-    def _residual(self, frames, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Centre-of-mass residual and strength ``(ty, tx)`` measured at ``target``, on the device."""
-        corr = self.measure.process(frames, target).corr
+    def _residual(self, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Centre-of-mass residual and strength ``(ty, tx)`` of the loaded frame at ``target``, on the device."""
+        corr = self.measure.measure(target).corr
         com = centre_of_mass(combine_strips(pair_strips(corr), self._strip_params.corr_offset), self._strip_params)
         return com.disparity.reshape(self.grid).to(torch.float32), com.strength.reshape(self.grid).to(torch.float32)
 
@@ -102,9 +102,10 @@ class Pipeline:
         best_t, best_s, target = self._best_target, self._best_strength, self._target
         best_t.fill_(float("nan"))
         best_s.zero_()
+        self.measure.load(frames)  # once per frame; every pass below measures it at new targets
         for value in cfg.sweep:
             target.fill_(value)
-            residual, strength = self._residual(frames, target)
+            residual, strength = self._residual(target)
             better = (torch.isfinite(residual) & (residual.abs() <= cfg.trust) & (strength >= cfg.min_strength)
                       & (strength > best_s))
             best_t.copy_(torch.where(better, target + residual, best_t))
@@ -113,20 +114,18 @@ class Pipeline:
         measured = torch.isfinite(best_t)
         strength = best_s
         for _ in range(cfg.refine_passes):
-            residual, strength = self._residual(frames, target)
+            residual, strength = self._residual(target)
             step = torch.isfinite(residual) & (residual.abs() <= cfg.trust) & measured
             target.copy_(torch.where(step, target + residual, target))
         initial = torch.where(measured, target, torch.full_like(target, float("nan")))
         tp = self.network_tp
         disparity = target
+        tp.load(frames)
         for _ in range(cfg.network_passes):
-            tp.prepare(frames, disparity)
-            tp.convert()
-            tp.correlate()
-            disparity = self._infer(self.model, tp.result.layers, disparity, grid=self.grid)
+            disparity = self._infer(self.model, tp.measure(disparity).layers, disparity, grid=self.grid)
         disparity = torch.where(measured, disparity, torch.full_like(disparity, float("nan")))
         if cfg.textures:  # shift-corrected at the network's disparity
-            tp.prepare(frames, torch.nan_to_num(disparity, nan=0.0))
+            tp.set_targets(torch.nan_to_num(disparity, nan=0.0))
             tp.convert()
             tp.texture()
         confidence = torch.where(measured, strength, torch.zeros_like(strength))

@@ -13,20 +13,11 @@ import numpy as np
 
 from tpnet_gpu.baseline.lma import LmaParams, combine_groups, fit_peaks
 from tpnet_gpu.baseline.strips import StripParams, centre_of_mass, combine_strips, pair_strips
-from tpnet_gpu.config import CorrelationConfig
+from tpnet_gpu.config import BASELINE_CORRELATION  # noqa: F401 - re-exported: defaults live in config
 
 # process(target (tiles_y, tiles_x) float32) -> pair correlations (tiles, 6, 15, 15) as NumPy
 Correlator = Callable[[np.ndarray], np.ndarray]
 
-# The correlation the baseline measures with (our recommended choice, by measurement): green only. The as-coded
-# mix (R 0.25, B 0.25, G 0.5) skews the phase-correlation peak of Bayer data at fractional per-camera shifts:
-# the zero-filled quarter-density R and B lattices alias, and phase normalisation amplifies their aliased
-# bins. On a rendered plane at 3.3 px the LMA read a residual of +0.18-0.20 px at the true disparity with
-# the as-coded mix and 0.009 with green only; plain correlation (huge fat zero) is unskewed but loses the
-# phase-correlation strength scale the LMA thresholds are set for. The fat zero (absolute, units of the
-# product of two CLT tiles) suits 12-bit raw data near mid-scale: it keeps noise-only frequencies (sky,
-# flat colours) from forming confident peaks (bench_accuracy: low-texture tiles measured 96 % -> 10 %).
-BASELINE_CORRELATION = CorrelationConfig(colour_weights=(0.0, 0.0, 1.0), fat_zero=1.0e4)
 
 
 @dataclass(frozen=True)
@@ -169,13 +160,19 @@ def estimate(correlate: Correlator, shape: tuple[int, int], params: BaselinePara
 
 def processor_correlator(processor, frames, rig=None) -> Correlator:
     """A ``Correlator`` running ``processor`` (a ``TileProcessor``) on ``frames``: ideal-rig targets go in as
-    disparities; with a calibrated ``rig`` (``tpnet_gpu.camera.Rig``) its tile centres are used."""
+    disparities; with a calibrated ``rig`` (``tpnet_gpu.camera.Rig``) its tile centres are used. The frames are
+    loaded once (and again only if the processor loaded other frames in between)."""
+    loaded = -1
 
     def correlate(target: np.ndarray) -> np.ndarray:
+        nonlocal loaded
+        if processor.frame_count != loaded:
+            processor.load(frames)
+            loaded = processor.frame_count
         if rig is None:
-            out = processor.process(frames, target)
+            out = processor.measure(target)
         else:
-            out = processor.process(frames, centres=rig.tile_centres(target).astype(np.float32))
+            out = processor.measure(centres=rig.tile_centres(target).astype(np.float32))
         return out.corr.detach().cpu().numpy()
 
     return correlate

@@ -85,6 +85,7 @@ class TileProcessor:
             self._backend = WarpBackend(geo, self.config, self.texture_config, self._buffers, graph=self.graph)
         self._masked = False  # the last targets came with an active mask
         self._ideal = True  # the last targets were disparities (centres computed on the device)
+        self._frame_count = 0
         if self.device.is_cuda:  # the zero-fills above must finish before a user's side stream writes inputs
             wp.synchronize_device(self.device)
 
@@ -100,6 +101,12 @@ class TileProcessor:
     colours = property(lambda self: self.geometry.colours)
     pairs = property(lambda self: self.geometry.pairs)
     cfa = property(lambda self: self.geometry.cfa)
+
+    @property
+    def frame_count(self) -> int:
+        """How many frames ``load`` (or ``process``/``prepare``) has taken: a caller that loaded a frame and
+        measures it later can tell whether someone loaded another one in between."""
+        return self._frame_count
 
     @property
     def result(self) -> TileResult:
@@ -122,6 +129,7 @@ class TileProcessor:
         if not in_place:
             b.frames_t.copy_(frames)  # converts dtype and device
         self._backend.run(("pad",), frames=frames if in_place else None, masked=False)
+        self._frame_count += 1
 
     def set_targets(self, target_disparity=None, *, centres=None, active=None) -> None:
         """Copy one pass's targets into the processor's buffers (see ``measure`` for the arguments)."""

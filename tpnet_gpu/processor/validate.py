@@ -9,9 +9,9 @@ import numpy as np
 import torch
 
 from tpnet_gpu import tables
+from tpnet_gpu.config import BACKENDS
 from tpnet_gpu.layout import DTT_SIZE, TILE_SIZE, TILE_STRIDE
 
-BACKENDS = ("warp", "taichi")
 
 
 @dataclass(frozen=True)
