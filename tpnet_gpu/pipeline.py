@@ -1,9 +1,10 @@
 """The frame pipeline: raw quad frames in, disparity (+ confidence) and an RGBA texture out, on one device.
 
 Per frame, everything stays on the pipeline's device (no host round trip): a coarse sweep of target
-disparities measured by the tile processor and the on-device centre-of-mass estimator (strips, C.1-C.3)
-gives initial targets; a few re-correlation passes refine them; TPNET reads the tile processor's layers at
-those targets (zero-copy) and predicts the disparity; the texture is made at the predicted disparity.
+disparities measured by the tile processor and the on-device centre-of-mass estimator (strips,
+geometry_and_lma.md C.1-C.3) gives initial targets; a few re-correlation passes refine them; TPNET reads the
+tile processor's layers at those targets (zero-copy) and predicts the disparity; the texture is made at the
+predicted disparity.
 Buffers belong to the two tile processors and the model and are allocated once per frame size; results are
 views of them, overwritten by the next frame.
 """

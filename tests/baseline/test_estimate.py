@@ -1,5 +1,5 @@
 """Whole-frame baseline (tpnet_gpu/baseline/estimate.py). Oracles: known disparities of Fourier-shifted
-textures and of rendered planes (geometry A.2, E), and textureless scenes that must be rejected."""
+textures and of rendered planes (geometry_and_lma.md A.2, E), and textureless scenes that must be rejected."""
 
 import numpy as np
 import pytest

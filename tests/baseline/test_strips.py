@@ -10,7 +10,7 @@ LAGS = np.arange(-7, 8)
 
 
 def synthetic(delta, width=1.5):
-    """Gaussian pair peaks at -delta x pair axis (geometry B.2), ``(T, 6, 15, 15)``."""
+    """Gaussian pair peaks at -delta x pair axis (geometry_and_lma.md B.2), ``(T, 6, 15, 15)``."""
     delta = np.asarray(delta, dtype=np.float64)
     corr = np.zeros((len(delta), 6, 15, 15))
     for p, (ux, uy) in enumerate(st.PAIR_AXES):

@@ -66,9 +66,9 @@ def test_network_layers_hand_case():
 
 
 def test_measures_a_plane_at_known_disparity(device, backend):
-    """Physical oracle: four views of a band-limited Bayer texture moved by -d r_i (geometry A.2). Correlating
-    at a wrong target T, every pair's peak sits at -(d - T) x pair axis (geometry B.2); refining with the
-    5x5 centroid converges to d within 0.05 px (median over the interior tiles)."""
+    """Physical oracle: four views of a band-limited Bayer texture moved by -d r_i (geometry_and_lma.md A.2).
+    Correlating at a wrong target T, every pair's peak sits at -(d - T) x pair axis (geometry_and_lma.md B.2);
+    refining with the 5x5 centroid converges to d within 0.05 px (median over the interior tiles)."""
     rng = np.random.default_rng(22)
     size, d_true = 64, 1.7
     colour = smooth_noise(rng, (size, size), 1.5) + 0.3 * smooth_noise(rng, (size, size), 1.5, channels=3)

@@ -91,14 +91,14 @@ def _iterate(bayer, estimator, cases=100, passes=10, seed=7):
 
 
 def test_iterated_mono_converges_to_true_shift():
-    # Target <= 0.02 px median over 100 cases, |a| <= 3 px (spec §6.4 measured 0.015; here ~0.014).
+    # Target <= 0.02 px median over 100 cases, |a| <= 3 px (§6.4: first measured 0.015; here ~0.014).
     errors = _iterate(False, parabola_peak)
     assert np.median(errors) <= 0.02
     assert np.max(errors) <= 0.1
 
 
 def test_iterated_bayer_converges_to_true_shift():
-    # Target <= 0.05 px median with the 5x5 positive-part centroid (spec §6.4 measured 0.031; here ~0.029).
+    # Target <= 0.05 px median with the 5x5 positive-part centroid (§6.4: first measured 0.031; here ~0.029).
     errors = _iterate(True, centroid_peak)
     assert np.median(errors) <= 0.05
     assert np.max(errors) <= 0.5

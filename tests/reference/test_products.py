@@ -61,7 +61,7 @@ def test_one_pixel_shift_kernel_moves_content_right():
 def test_kernel_product_equals_spatial_convolution(seed):
     """CLT product with a random asymmetric 3x3 kernel, inverse MCLT and overlap-add vs scipy.ndimage.convolve
     (periodic) on sigma 1 px textures: relative error <= 4 % in the interior (measured 1.9-2.8 % for these
-    strong blurs; spec §5.3 measured 1.5 % for its kernels;
+    strong blurs; §5.3 records 1.5 % for milder kernels;
     the MCLT is a lapped transform, so multiplication is convolution only approximately)."""
     rng = np.random.default_rng(seed)
     image = smooth_noise(rng, (64, 64), sigma=1.0)[0]

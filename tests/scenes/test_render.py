@@ -1,5 +1,6 @@
-"""Scene renderer (tpnet_gpu/scenes/render.py). Oracles: the disparity the plane was placed at (geometry
-E: d = f B / (Z p)), the tile processor's own correlation peak on the rendered raws, and determinism."""
+"""Scene renderer (tpnet_gpu/scenes/render.py). Oracles: the disparity the plane was placed at
+(geometry_and_lma.md E: d = f B / (Z p)), the tile processor's own correlation peak on the rendered raws, and
+determinism."""
 
 import numpy as np
 import pytest
@@ -30,8 +31,9 @@ def test_plane_ground_truth_is_exact():
 
 @pytest.mark.parametrize("noise", [False, True])
 def test_rendered_plane_correlates_at_its_disparity(noise):
-    """Correlating the rendered raws at target 0, every pair peaks at -d along its axis (geometry B.2);
-    refining converges to d within 0.05 px (median of the interior tiles), with realistic optics and noise."""
+    """Correlating the rendered raws at target 0, every pair peaks at -d along its axis
+    (geometry_and_lma.md B.2); refining converges to d within 0.05 px (median of the interior tiles), with
+    realistic optics and noise."""
     d = 2.3
     out = render(_plane_scene(d), RIG, optics=Optics(), sensor=Sensor(), noise=noise, seed=3)
     frames = out.raws.astype(np.float32) - out.sensor.black_level
@@ -92,7 +94,7 @@ def test_textures_and_bad_input():
 
 def test_rendered_plane_peaks_at_its_disparity_in_the_reference():
     """The golden reference correlating a rendered plane at target 0: every pair's integer peak sits at
-    -d x the pair's axis (geometry B.2), for d = 2 px."""
+    -d x the pair's axis (geometry_and_lma.md B.2), for d = 2 px."""
     from tpnet_gpu import reference as ref
 
     d = 2.0

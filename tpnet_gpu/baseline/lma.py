@@ -6,8 +6,8 @@ decision; finished tiles freeze. Only fixed-size blocks of tiles (``batch_size``
 
 Convention
 ----------
-* Correlation tiles are ``(15, 15)``: row = vertical lag + 7, column = horizontal lag + 7 (spec B.2).
-* Pair order (spec B.1): 0: cam 0->1 hor-top, 1: 2->3 hor-bottom, 2: 0->2 vert-left, 3: 1->3 vert-right,
+* Correlation tiles are ``(15, 15)``: row = vertical lag + 7, column = horizontal lag + 7 (B.2).
+* Pair order (B.1): 0: cam 0->1 hor-top, 1: 2->3 hor-bottom, 2: 0->2 vert-left, 3: 1->3 vert-right,
   4: 0->3 diag-main, 5: 2->1 diag-other.
 * A residual disparity delta puts the peak of every group at x = -delta along +x (ortho: lag (-delta, 0);
   diagonal: lag (-delta, -delta) in pixels), so the fitted centre x0 gives ``disparity = -x0``.
@@ -36,7 +36,7 @@ SINGULAR_RCOND = 1e-13  # reciprocal condition (unit-diagonal scaled) below whic
 
 @dataclass(frozen=True)
 class LmaParams:
-    """LMA defaults (spec C.7, ImageDttParameters). Names follow the spec; units in the comments."""
+    """LMA defaults (C.7, the original's ImageDttParameters). Names follow C.7; units in the comments."""
 
     half_width: float = 2.0  # lma_half_width: initial and regularisation target of Wm [px]
     cost_wy: float = 0.1  # lma_cost_wy: weight of the residual (Wm - half_width), before normalisation
@@ -74,7 +74,7 @@ class LmaResult:
     """Per-tile LMA output, all arrays ``(tiles,)``.
 
     disparity: residual disparity delta_hat = -x0 [px], NaN where the fit failed or the tile had no data.
-    strength: sum_g gamma_g A_g (capped by the maximal sample value, spec C.4), 0 where rejected.
+    strength: sum_g gamma_g A_g (capped by the maximal sample value, C.4), 0 where rejected.
     width_m, width_xy: fitted Wm and Wxy [px] (diagnostics), NaN where rejected.
     success: bool, the spec's success rule (final cost below the initial cost).
     iterations: int, LM steps taken (accepted and rejected); 0 for tiles without data.
@@ -89,7 +89,7 @@ class LmaResult:
 
 
 def combine_groups(corr, pairs_mask=None):
-    """Average the 6 pair correlations into the ortho and diagonal LMA groups (spec B.4).
+    """Average the 6 pair correlations into the ortho and diagonal LMA groups (B.4).
 
     Parameters
     ----------
@@ -157,7 +157,7 @@ def _shift(a, di: int, dj: int):
 
 
 def _convex_mask(values, valid, hwnd: int, cnvx_weight: float):
-    """Region-grown sample mask in the local box around the start cell (spec C.4, ``filterConvex``).
+    """Region-grown sample mask in the local box around the start cell (C.4, ``filterConvex``).
 
     values: ``(T, N, N)`` box of one group, N = 2 hwnd + 1, start at (hwnd, hwnd), NaN outside the tile.
     valid: ``(T, N, N)`` bool, box cell inside the 15x15 tile (the box clipped to the tile is a rectangle).
@@ -249,7 +249,7 @@ def _samples(ortho, diag, ixc, n_ortho, n_diag, params: LmaParams):
 
 
 def _model(p, x, y, group_of, with_jacobian: bool):
-    """Paraboloid model f ``(T, K)`` and optionally its Jacobian ``(T, K, 5)`` (spec C.4).
+    """Paraboloid model f ``(T, K)`` and optionally its Jacobian ``(T, K, 5)`` (C.4).
 
     p: ``(T, 5)`` parameters; x, y: ``(T, K)`` sample coordinates; group_of: ``(T, K)`` 0 ortho / 1 diagonal.
     """
@@ -398,7 +398,7 @@ def _counts(n, tiles: int, name: str):
 
 def fit_peaks(ortho, diag, x_start, *, n_ortho=4, n_diag=2, params: LmaParams = LmaParams(),
               batch_size: int = 8192) -> LmaResult:
-    """Fit the shared paraboloid peak to the ortho and diagonal groups of each tile (spec C.4).
+    """Fit the shared paraboloid peak to the ortho and diagonal groups of each tile (C.4).
 
     Parameters
     ----------
@@ -409,7 +409,7 @@ def fit_peaks(ortho, diag, x_start, *, n_ortho=4, n_diag=2, params: LmaParams = 
     n_ortho, n_diag : int or array_like ``(tiles,)``
         Pairs averaged per group (sample weight factor); a group with 0 pairs contributes no samples.
     params : LmaParams
-        Solver and sampling settings (spec C.7 defaults).
+        Solver and sampling settings (C.7 defaults).
     batch_size : int
         Tiles processed together (memory ~ 15 kB per tile); results do not depend on it.
 

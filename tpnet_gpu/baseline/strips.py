@@ -18,7 +18,7 @@ from tpnet_gpu import tables
 RADIUS = tables.CORR_RADIUS
 STRIP_ROWS = 9  # corr_strip_hight
 STRIP_COLS = 2 * RADIUS + 1
-# Pair directions u (first -> second camera) in lag units, quad order (geometry B.1).
+# Pair directions u (first -> second camera) in lag units, quad order (geometry_and_lma.md B.1).
 PAIR_AXES = ((1, 0), (1, 0), (0, 1), (0, 1), (1, 1), (1, -1))
 
 
