@@ -5,6 +5,7 @@ Oracles: the source tree (what must be there), pyproject.toml (what is declared)
 import ast
 import json
 import re
+import shutil
 import subprocess
 import sys
 import tomllib
@@ -34,9 +35,13 @@ def source_modules() -> dict[str, Path]:
 
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("wheel")
+    # built from a copy of the tracked sources: setuptools keeps a build/ folder whose stale modules would
+    # otherwise hide a module the tree no longer ships (and the checkout stays clean)
+    out, src = tmp_path_factory.mktemp("wheel"), tmp_path_factory.mktemp("src") / "tpnet-gpu"
+    skip = shutil.ignore_patterns(".git", ".venv*", "build", "dist", "out", "__pycache__", "*.egg-info", ".whl*")
+    shutil.copytree(ROOT, src, ignore=skip)
     done = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w",
-                           str(out), str(ROOT)], capture_output=True, text=True, timeout=600)
+                           str(out), str(src)], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
     (found,) = out.glob("tpnet_gpu-*.whl")
     return found

@@ -14,7 +14,8 @@ import warnings
 import numpy as np
 import pytest
 
-from tpnet_gpu.baseline.lma import LmaParams, _convex_mask, _model, _samples, combine_groups, fit_peaks
+from tpnet_gpu.baseline.lma import LmaParams, _model, combine_groups, fit_peaks
+from tpnet_gpu.baseline.lma_samples import _convex_mask, _samples
 
 LAG = np.arange(15) - 7.0
 CY, CX = np.meshgrid(LAG, LAG, indexing="ij")  # pixel lags of each (row, column)
