@@ -1,37 +1,35 @@
 """Accuracy of the hand-crafted baseline against rendered ground truth, beside peers on the same tiles.
 
-    python bench/bench_accuracy.py [--scenes 3] [--width 1024 --height 768] [--json out/bench_accuracy.json]
+    tpnet bench accuracy [--scenes 3] [--width 1024 --height 768] [--peer-passes 4] [--json out/bench_accuracy.json]
+                         [--png out/bench_accuracy.png]
+    python -m tpnet_gpu.bench.bench_accuracy [same options]
 
 Scenes: the demo scene, then random scenes (seeded), rendered with realistic optics and noise. Ours: the
 tile processor + strips/centre of mass/LMA + sweep and refinement (``tpnet_gpu.baseline.estimate``). Peers:
 OpenCV StereoSGBM, OpenCV phaseCorrelate, scikit-image phase_cross_correlation (bench/peers.py). Per tile class
 (tpnet_gpu/evaluation.py) the RMSE, median |error| and coverage; RMSE vs the 3x3 ground-truth spread (the
-paper's Figure 8) as a PNG. Prints a table, saves JSON.
+paper's Figure 8) as a PNG. Prints a table, saves JSON. Needs the optional ``bench`` extra (OpenCV, matplotlib):
+``pip install -e ".[bench]"``.
 """
 
 from __future__ import annotations
 
-import argparse
-import platform
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import peers  # noqa: E402
-import report as report_tools  # noqa: E402
-
-from tpnet_gpu.baseline.estimate import (  # noqa: E402
+from tpnet_gpu.baseline.estimate import (
     BASELINE_CORRELATION, BaselineParams, consistency_pass, initial_targets, processor_correlator, refine)
-from tpnet_gpu.camera import Rig  # noqa: E402
-from tpnet_gpu.config import CorrelationConfig  # noqa: E402
-from tpnet_gpu.processor import TileProcessor  # noqa: E402
-from tpnet_gpu.scenes import Optics, Sensor, demo_scene, random_scene, render  # noqa: E402
+from tpnet_gpu.camera import Rig
+from tpnet_gpu.config import CorrelationConfig
+from tpnet_gpu.processor import TileProcessor
+from tpnet_gpu.scenes import Optics, Sensor, demo_scene, random_scene, render
 
-def log(message: str) -> None:
-    print(f"[bench_accuracy] {message}", file=sys.stderr, flush=True)
+from . import common, peers
+from . import report as report_tools
+
+log = common.logger("bench_accuracy")
 
 
 def run_scene(index: int, args, rig: Rig) -> dict:
@@ -70,22 +68,21 @@ def run_scene(index: int, args, rig: Rig) -> dict:
     log(f"  SGBM: {time.perf_counter() - start:.1f} s")
     for name in peers.METHODS:
         start = time.perf_counter()
-        estimates[name] = peers.tile_peer(name, left, right, out["initial"])
+        estimates[name] = peers.tile_peer(name, left, right, out["initial"], passes=args.peer_passes)
         log(f"  {name}: {time.perf_counter() - start:.1f} s")
     out["estimates"] = estimates
     return out
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--scenes", type=int, default=3)
-    parser.add_argument("--width", type=int, default=1024)
-    parser.add_argument("--height", type=int, default=768)
-    parser.add_argument("--seed", type=int, default=100)
-    parser.add_argument("--device", default="cpu")
-    parser.add_argument("--json", default="out/bench_accuracy.json")
-    parser.add_argument("--png", default="out/bench_accuracy.png")
+def main(argv=None) -> dict:
+    parser = common.parser(__name__, __doc__, full_help=True)
+    report_tools.scene_arguments(parser, "accuracy", scenes=3, width=1024, height=768, seed=100)
+    parser.add_argument("--peer-passes", type=int, default=4,
+                        help="re-centring passes of the per-tile phase-correlation peers (default 4)")
     args = parser.parse_args(argv)
+    if args.scenes < 1 or args.peer_passes < 1:
+        parser.error("--scenes, --peer-passes: expected at least 1")
+    common.require_extras("cv2", *(("matplotlib",) if args.png else ()))
     rig = Rig(width=args.width, height=args.height)
     scenes = [run_scene(i, args, rig) for i in range(args.scenes)]
 
@@ -93,11 +90,10 @@ def main(argv=None) -> int:
     title = (f"Disparity accuracy, {args.scenes} rendered scenes of {args.width}x{args.height} (quad, 258 mm, "
              f"noise on), tile classes: tpnet_gpu/evaluation.py")
     meta = {"bench": "accuracy", "scenes": args.scenes, "width": args.width, "height": args.height,
-            "seed": args.seed, "machine": {"platform": platform.platform(), "python": platform.python_version()},
+            "seed": args.seed, "peer_passes": args.peer_passes, "machine": common.machine_info(),
             "optics": str(Optics()), "sensor": str(Sensor())}
-    report_tools.publish(scenes, methods, title, methods[0], meta, args.json, args.png, log=log)
-    return 0
+    return report_tools.publish(scenes, methods, title, methods[0], meta, args.json, args.png, log=log)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(common.run(main))

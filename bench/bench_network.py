@@ -1,38 +1,36 @@
 """TPNET against the hand-crafted LMA baseline on held-out rendered scenes (the paper's claim: 2x lower error).
 
-    python bench/bench_network.py [--scenes 4] [--width 640 --height 480] [--weights PATH] [--json ...]
+    tpnet bench network [--scenes 4] [--width 640 --height 480] [--passes 3] [--weights PATH] [--json ...] [--png ...]
+    python -m tpnet_gpu.bench.bench_network [same options]
 
 Scenes are rendered fresh with seeds no training scene uses (``--seed`` 10000+), the demo scene first. The
 baseline measures every tile (sweep + refinement); the network then reads the tile processor's layers at the
 baseline's disparities (tiles the baseline rejected start from their nearest measured neighbour) and predicts
 the residual; each further pass re-correlates at the previous pass's disparity (one row per pass count, up
 to ``--passes``). All are scored on the same tiles and classes (tpnet_gpu/evaluation.py), and on the tiles
-the baseline gets within 1 px (``rmse-ref``, the paper's protocol). Table + JSON + PNG.
+the baseline gets within 1 px (``rmse-ref``, the paper's protocol). Table + JSON + PNG (the PNG needs matplotlib,
+of the optional ``bench`` extra).
 """
 
 from __future__ import annotations
 
-import argparse
 import platform
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import report as report_tools  # noqa: E402
+from tpnet_gpu.baseline.estimate import BASELINE_CORRELATION, estimate, processor_correlator
+from tpnet_gpu.camera import Rig
+from tpnet_gpu.net import infer
+from tpnet_gpu.processor import TileProcessor
+from tpnet_gpu.scenes import Sensor, demo_scene, random_scene, render
 
-from tpnet_gpu.baseline.estimate import BASELINE_CORRELATION, estimate, processor_correlator  # noqa: E402
-from tpnet_gpu.camera import Rig  # noqa: E402
-from tpnet_gpu.net import infer  # noqa: E402
-from tpnet_gpu.processor import TileProcessor  # noqa: E402
-from tpnet_gpu.scenes import Sensor, demo_scene, random_scene, render  # noqa: E402
+from . import common
+from . import report as report_tools
 
-
-def log(message: str) -> None:
-    print(f"[bench_network] {message}", file=sys.stderr, flush=True)
+log = common.logger("bench_network")
 
 
 def fill_nearest(values: np.ndarray) -> np.ndarray:
@@ -50,18 +48,16 @@ def pass_name(n: int) -> str:
     return f"TPNET ({n} pass{'es' if n > 1 else ''})"
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--scenes", type=int, default=4)
-    parser.add_argument("--width", type=int, default=640)
-    parser.add_argument("--height", type=int, default=480)
-    parser.add_argument("--seed", type=int, default=10000)
+def main(argv=None) -> dict:
+    parser = common.parser(__name__, __doc__, full_help=True)
+    report_tools.scene_arguments(parser, "network", scenes=4, width=640, height=480, seed=10000)
     parser.add_argument("--weights", default=None, help="TPNET weights (default: the shipped ones)")
     parser.add_argument("--passes", type=int, default=3, help="most network passes (re-measured at its own output)")
-    parser.add_argument("--device", default="cpu")
-    parser.add_argument("--json", default="out/bench_network.json")
-    parser.add_argument("--png", default="out/bench_network.png")
     args = parser.parse_args(argv)
+    if args.scenes < 1 or args.passes < 1:
+        parser.error("--scenes, --passes: expected at least 1")
+    if args.png:
+        common.require_extras("matplotlib")
 
     rig = Rig(width=args.width, height=args.height)
     model = infer.load(args.weights, device=args.device)
@@ -96,9 +92,8 @@ def main(argv=None) -> int:
              f"(seeds {args.seed}+), weights {args.weights or infer.DEFAULT_WEIGHTS.name}")
     meta = {"bench": "network", "scenes": args.scenes, "width": args.width, "height": args.height,
             "seed": args.seed, "passes": args.passes, "machine": platform.platform()}
-    report_tools.publish(scenes, methods, title, "LMA baseline", meta, args.json, args.png, log=log)
-    return 0
+    return report_tools.publish(scenes, methods, title, "LMA baseline", meta, args.json, args.png, log=log)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(common.run(main))

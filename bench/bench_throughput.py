@@ -1,16 +1,16 @@
 """Throughput benchmark: the tile processor and TPNET per stage and per whole quad frame.
 
-    python bench/bench_throughput.py [--device cpu|cuda] [--height 1936 --width 2592] [--repeat 3] [--threads N]
-                                     [--taichi-threads 1,2 | --no-taichi] [--json out/bench_throughput.json]
-                                     [--soak N]
+    tpnet bench throughput [--device cpu|cuda] [--height 1936 --width 2592] [--repeat 3] [--threads N]
+                           [--taichi-threads 1,2 | --no-taichi] [--json out/bench_throughput.json] [--soak N]
+    python -m tpnet_gpu.bench.bench_throughput [same options]
 
 One quad frame (4 cameras, random 12-bit raw values, seeded), every tile at one target disparity. Three
 implementations of the same tile-processor math, run one after the other (each one's outputs are freed before
 the next starts: a full-frame CLT is ~1 GB):
 
 * **warp**: ``TileProcessor`` (the Warp kernels), then TPNET (``tpnet_gpu.net.model.TPNet``) on its layers;
-* **numpy**: the vectorised float32 NumPy twin (bench/numpy_tp.py), CPU runs only;
-* **torch**: the plain-PyTorch-ops twin (bench/torch_tp.py) on the processor's torch device;
+* **numpy**: the vectorised float32 NumPy twin (bench/twins/numpy_tp.py), CPU runs only;
+* **torch**: the plain-PyTorch-ops twin (bench/twins/torch_tp.py) on the processor's torch device;
 * **taichi**: ``TileProcessor(backend="taichi")`` (kernels/taichi_*.py, the same buffers and outputs), then the
   same network. Taichi fixes its CPU thread count at ``ti.init``, so each count of ``--taichi-threads`` (default
   1 and 2) runs in its own process (``TPNET_TAICHI_THREADS``); on CUDA one process runs it on the GPU. Its
@@ -35,8 +35,8 @@ disparities each time) through ``TileProcessor.process`` and ``TPNet.forward_fra
 (VmRSS) every 50 frames. Table, paper figures, targets and soak summary go to stdout, progress to stderr, all
 numbers with machine information to JSON.
 
-Modules: this script (the Warp and twin runs, the network split, ``main``); throughput_common.py (log, stage
-timing, agreement), throughput_taichi.py (the Taichi worker processes), throughput_stream.py (graph replay,
+Modules: this one (the Warp and twin runs, the network split, ``main``); throughput_common.py (stage timing,
+agreement), throughput_taichi.py (the Taichi worker processes), throughput_stream.py (graph replay,
 soak), throughput_report.py (table, targets, printed report).
 """
 
@@ -44,8 +44,7 @@ from __future__ import annotations
 
 import argparse
 import gc
-import os
-import platform
+import json
 import sys
 import time
 from pathlib import Path
@@ -55,20 +54,19 @@ import torch
 import torch.nn.functional as F
 import warp as wp
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_tp import PAPER_GPU, PAPER_TP_MS, cpu_model, device_name, frame_arguments  # noqa: E402
-from numpy_tp import numpy_convert, numpy_correlate  # noqa: E402
-from report import save_json  # noqa: E402
-from throughput_common import AGREEMENT_TOL, agreement, log, run_stages  # noqa: E402
-from throughput_report import PAPER_NETWORK_S, print_report, stage_table, targets  # noqa: E402
-from throughput_stream import measure_graph_replay, soak  # noqa: E402
-from throughput_taichi import run_taichi, spawn_taichi, taichi_columns  # noqa: E402
-from torch_tp import torch_convert, torch_correlate, torch_layers  # noqa: E402
+from tpnet_gpu import tables
+from tpnet_gpu.net import model as net_model
+from tpnet_gpu.processor import TileProcessor
+from tpnet_gpu.warp_setup import default_device, init_warp
 
-from tpnet_gpu import tables  # noqa: E402
-from tpnet_gpu.net import model as net_model  # noqa: E402
-from tpnet_gpu.processor import TileProcessor  # noqa: E402
-from tpnet_gpu.warp_setup import default_device, init_warp  # noqa: E402
+from . import common
+from .common import PAPER_GPU, PAPER_TP_MS
+from .throughput_common import AGREEMENT_TOL, agreement, log, run_stages
+from .throughput_report import PAPER_NETWORK_S, print_report, stage_table, targets
+from .throughput_stream import measure_graph_replay, soak
+from .throughput_taichi import run_taichi, spawn_taichi, taichi_columns
+from .twins.numpy_tp import numpy_convert, numpy_correlate
+from .twins.torch_tp import torch_convert, torch_correlate, torch_layers
 
 IMPLEMENTATIONS = ("warp", "numpy", "torch")
 
@@ -227,8 +225,8 @@ def run_twin(impl: str, args, cfa, frames, frames_t, target, net, reference: dic
 
 # --- main -------------------------------------------------------------------------------------------------------
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    frame_arguments(parser)
+    parser = common.parser(__name__, __doc__)
+    common.frame_arguments(parser)
     parser.add_argument("--threads", type=int, default=None, help="torch intra-op threads (default: torch's own)")
     parser.add_argument("--soak", type=int, default=0, help="frames to stream for the RSS soak (default 0: none)")
     parser.add_argument("--json", default="out/bench_throughput.json", help="output JSON path ('' to skip)")
@@ -244,15 +242,13 @@ def main(argv=None) -> dict:
         parser.error(f"--taichi-threads: expected comma-separated thread counts, got {args.taichi_threads!r}")
     if any(n < 1 for n in args.taichi_threads):
         parser.error(f"--taichi-threads: expected thread counts >= 1, got {args.taichi_threads}")
-    if args.repeat < 1:
-        parser.error("--repeat: expected at least 1")
+    cfa = common.frame_cfa(parser, args)
     if args.soak < 0:
         parser.error("--soak: expected a number of frames >= 0")
     if args.threads is not None:
         if args.threads < 1:
             parser.error("--threads: expected at least 1")
         torch.set_num_threads(args.threads)
-    cfa = None if args.cfa.lower() == "mono" else args.cfa
     init_warp()
     device = wp.get_device(args.device or default_device())
     tdev = torch.device(wp.device_to_torch(device))
@@ -267,19 +263,16 @@ def main(argv=None) -> dict:
         gc.collect()
 
     cams = len(tables.QUAD_OFFSETS)
-    rng = np.random.default_rng(args.seed)
-    frames = rng.integers(0, 4096, size=(cams, args.height, args.width), dtype=np.uint16).astype(np.float32)
+    frames = common.random_frames(np.random.default_rng(args.seed), args.height, args.width, cams)
     frames_t = torch.from_numpy(frames).to(tdev)  # float32, contiguous: the processor reads it in place
     tiles_y, tiles_x = args.height // 8, args.width // 8
     target = torch.full((tiles_y, tiles_x), args.disparity, dtype=torch.float32, device=tdev)
     if args.taichi_worker:  # a Taichi worker process: only the Taichi rows, to a JSON file for the parent
-        import json  # noqa: PLC0415
-
         report = run_taichi(args, cfa, device, frames_t, target, net)
         Path(args.taichi_worker).write_text(json.dumps(report))
         return report
-    log(f"{args.width}x{args.height}, {cams} cameras, {tiles_y * tiles_x} tiles on {device} ({device_name(device)}); "
-        f"torch threads {torch.get_num_threads()}")
+    log(f"{args.width}x{args.height}, {cams} cameras, {tiles_y * tiles_x} tiles on {device} "
+        f"({common.device_name(device)}); torch threads {torch.get_num_threads()}")
 
     runs, warmups = {}, {}
     warp = run_warp(args, cfa, device, frames_t, target, net)
@@ -308,13 +301,11 @@ def main(argv=None) -> dict:
 
     # --- report ---------------------------------------------------------------------------------------------------
     table = stage_table(runs, warmups, impls)
-    gpu_name = device_name(device)
+    gpu_name = common.device_name(device)
     report_targets = targets(table, graph, gpu_name, is_cuda, (args.height, args.width))
 
     report = {
-        "frame": {"width": args.width, "height": args.height, "cameras": cams, "tiles": tiles_y * tiles_x,
-                  "pairs": len(tables.QUAD_PAIRS), "cfa": cfa, "target_disparity": args.disparity, "seed": args.seed,
-                  "raw_values": "uniform integers 0..4095 as float32"},
+        "frame": common.frame_info(args, cfa, cams, tiles_y * tiles_x, len(tables.QUAD_PAIRS)),
         "timing": {
             "repeat": args.repeat, "statistic": "median (best and all runs listed)",
             "sync": "wp.synchronize_device / torch.cuda.synchronize before each timer stops",
@@ -345,20 +336,17 @@ def main(argv=None) -> dict:
         "targets": report_targets,
         "soak": soak_report,
         "device": {"warp_device": str(device), "torch_device": str(tdev), "name": gpu_name, "is_cuda": is_cuda},
-        "machine": {"platform": platform.platform(), "python": platform.python_version(),
-                    "cpu_count": os.cpu_count(), "cpu_model": cpu_model(), "numpy": np.__version__,
-                    "warp": wp.__version__, "torch": torch.__version__, "torch_threads": torch.get_num_threads(),
-                    "threads": "Warp CPU kernels run on one thread; NumPy's BLAS and torch use all cores unless "
-                               "limited (--threads for torch)",
-                    "thread_env": {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                                                                  "MKL_NUM_THREADS")},
-                    "cuda": torch.cuda.get_device_name(tdev) if tdev.type == "cuda" else None},
+        "machine": common.machine_info(
+            torch_threads=torch.get_num_threads(),
+            threads="Warp CPU kernels run on one thread; NumPy's BLAS and torch use all cores unless limited "
+                    "(--threads for torch)",
+            cuda=torch.cuda.get_device_name(tdev) if tdev.type == "cuda" else None),
     }
     print_report(report)
     if args.json:
-        log(f"wrote {save_json(report, args.json)}")
+        log(f"wrote {common.save_json(report, args.json)}")
     return report
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(common.run(main))

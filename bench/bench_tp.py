@@ -1,12 +1,13 @@
 """Tile-processor speed benchmark: the Warp stages of ``TileProcessor`` against the vectorised NumPy peer.
 
-    python bench/bench_tp.py [--device cpu|cuda] [--height 1936 --width 2592] [--repeat 3] [--json out/bench_tp.json]
+    tpnet bench tp [--device cpu|cuda] [--height 1936 --width 2592] [--repeat 3] [--json out/bench_tp.json]
+    python -m tpnet_gpu.bench.bench_tp [same options]
 
 One quad frame (4 cameras, random 12-bit raw values, seeded), every tile at one target disparity. The processor is
 built once; ``prepare`` (input mapping, padding, tile centres) runs once and is not part of the stage timings.
 Each stage is timed on its own, the Warp stages with a device synchronisation before the timer stops. The first
 pass of each implementation is a warm-up (Warp: kernel compilation; NumPy: first touch of its buffers), then
-``--repeat`` passes give median and best. The NumPy peer (bench/numpy_tp.py) gets the processor's own tile
+``--repeat`` passes give median and best. The NumPy peer (bench/twins/numpy_tp.py) gets the processor's own tile
 centres and correlation parameters, and the two results are compared (max |numpy - warp| / max |warp|).
 
 Prints a table (stage | warp ms | numpy ms | ratio numpy/warp) and writes the numbers with machine information to
@@ -15,30 +16,23 @@ JSON. Progress goes to stderr. To add a stage, add one ``Stage`` entry to ``STAG
 
 from __future__ import annotations
 
-import argparse
-import os
-import platform
-import statistics
 import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
 import torch
 import warp as wp
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from numpy_tp import numpy_convert, numpy_correlate  # noqa: E402
-from report import save_json  # noqa: E402
+from tpnet_gpu import tables
+from tpnet_gpu.processor import TileProcessor
 
-from tpnet_gpu import tables  # noqa: E402
-from tpnet_gpu.processor import TileProcessor  # noqa: E402
+from . import common
+from .common import PAPER_GPU, PAPER_TP_MS, summary, timed_ms
+from .twins.numpy_tp import numpy_convert, numpy_correlate
 
-# Filippov & Dzhimiev, "See far with TPNET": the whole tile processor, one full quad frame, on a GTX 1050 Ti.
-PAPER_TP_MS = 87.0
-PAPER_GPU = "GTX 1050 Ti"
+log = common.logger("bench_tp")
 
 
 @dataclass(frozen=True)
@@ -71,37 +65,6 @@ STAGES = (
 )
 
 
-def log(message: str) -> None:
-    print(f"[bench_tp] {message}", file=sys.stderr, flush=True)
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def device_name(device) -> str:
-    return device.name if device.is_cuda else f"CPU ({cpu_model()})"
-
-
-def timed_ms(fn: Callable[[], None], sync: Callable[[], None] | None = None) -> float:
-    start = time.perf_counter()
-    fn()
-    if sync is not None:
-        sync()
-    return 1e3 * (time.perf_counter() - start)
-
-
-def summary(runs: list[float]) -> dict:
-    return {"median": statistics.median(runs), "best": min(runs), "runs": runs}
-
-
 def run_passes(label: str, stages, run_stage: Callable[[Stage], float], repeat: int) -> tuple[dict, dict]:
     """One warm-up pass and ``repeat`` timed passes over ``stages``; returns (warm-up ms, run ms lists) by name."""
     warmup = {}
@@ -124,36 +87,22 @@ def max_relative_difference(got: np.ndarray, want: np.ndarray) -> float:
     return diff / scale if scale > 0 else diff
 
 
-def frame_arguments(parser: argparse.ArgumentParser) -> None:
-    """The speed benches' common options: device, frame size, repeats, target disparity, CFA, seed."""
-    parser.add_argument("--device", default=None, help="Warp device: cpu, cuda, cuda:N (default: cuda if present)")
-    parser.add_argument("--height", type=int, default=1936)
-    parser.add_argument("--width", type=int, default=2592)
-    parser.add_argument("--repeat", type=int, default=3, help="timed passes after the warm-up (default 3)")
-    parser.add_argument("--disparity", type=float, default=2.5, help="target disparity of every tile, px")
-    parser.add_argument("--cfa", default=tables.DEFAULT_CFA, help="Bayer pattern, or 'mono'")
-    parser.add_argument("--seed", type=int, default=0)
-
-
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    frame_arguments(parser)
+    parser = common.parser(__name__, __doc__)
+    common.frame_arguments(parser)
     parser.add_argument("--json", default="out/bench_tp.json", help="output JSON path ('' to skip)")
     args = parser.parse_args(argv)
-    if args.repeat < 1:
-        parser.error("--repeat: expected at least 1")
-    cfa = None if args.cfa.lower() == "mono" else args.cfa
+    cfa = common.frame_cfa(parser, args)
 
     cams = len(tables.QUAD_OFFSETS)
-    rng = np.random.default_rng(args.seed)
-    frames = rng.integers(0, 4096, size=(cams, args.height, args.width), dtype=np.uint16).astype(np.float32)
+    frames = common.random_frames(np.random.default_rng(args.seed), args.height, args.width, cams)
 
     # --- Warp -----------------------------------------------------------------------------------------------------
     start = time.perf_counter()
     tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, device=args.device, backend="warp")
     setup_ms = 1e3 * (time.perf_counter() - start)
-    log(f"{tp.width}x{tp.height}, {cams} cameras, {tp.tiles} tiles, {len(tp.pairs)} pairs on {tp.device} "
-        f"({device_name(tp.device)}); processor built in {setup_ms:.0f} ms")
+    log(f"{args.width}x{args.height}, {cams} cameras, {tp.tiles} tiles, {len(tp.pairs)} pairs on {tp.device} "
+        f"({common.device_name(tp.device)}); processor built in {setup_ms:.0f} ms")
     frames_t = torch.from_numpy(frames).to(tp.torch_device)  # float32, contiguous: read in place
 
     def sync() -> None:
@@ -204,9 +153,7 @@ def main(argv=None) -> dict:
              "ratio_numpy_over_warp": numpy_total["median"] / warp_total_same["median"], "ratio_over_stages": both}
 
     report = {
-        "frame": {"width": tp.width, "height": tp.height, "cameras": cams, "tiles": tp.tiles,
-                  "pairs": len(tp.pairs), "cfa": cfa, "target_disparity": args.disparity, "seed": args.seed,
-                  "raw_values": "uniform integers 0..4095 as float32"},
+        "frame": common.frame_info(args, cfa, cams, tp.tiles, len(tp.pairs)),
         "timing": {"repeat": args.repeat, "statistic": "median (best and all runs listed)",
                    "warp_sync": "wp.synchronize_device before each timer stops",
                    "excluded": "prepare (input mapping, padding, tile centres) and the warm-up pass",
@@ -217,18 +164,15 @@ def main(argv=None) -> dict:
         "warp_first_prepare_ms": prepare_first_ms,
         "warp_process_ms": process_ms,
         "agreement": agreement,
-        "device": {"warp_device": str(tp.device), "name": device_name(tp.device), "is_cuda": tp.device.is_cuda},
-        "machine": {"platform": platform.platform(), "python": platform.python_version(),
-                    "cpu_count": os.cpu_count(), "cpu_model": cpu_model(), "numpy": np.__version__,
-                    "warp": wp.__version__, "torch": torch.__version__,
-                    "threads": "Warp CPU kernels run on one thread; NumPy's BLAS calls use all cores unless limited",
-                    "thread_env": {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}},
+        "device": {"warp_device": str(tp.device), "name": common.device_name(tp.device), "is_cuda": tp.device.is_cuda},
+        "machine": common.machine_info(
+            threads="Warp CPU kernels run on one thread; NumPy's BLAS calls use all cores unless limited"),
         "paper": {"tp_ms": PAPER_TP_MS, "gpu": PAPER_GPU,
                   "note": "whole tile processor, one full quad frame; comparable only with CUDA timings"},
     }
     print_table(report)
     if args.json:
-        log(f"wrote {save_json(report, args.json)}")
+        log(f"wrote {common.save_json(report, args.json)}")
     return report
 
 
@@ -249,13 +193,7 @@ def print_table(report: dict) -> None:
             for s in report["stages"]]
     tot = report["total"]
     rows.append(("total", ms(tot["warp_ms"]), ms(tot["numpy_ms"]), ratio(tot["ratio_numpy_over_warp"])))
-    header = ("stage", "warp ms", "numpy ms", "ratio (numpy/warp)")
-    widths = [max(len(r[i]) for r in rows + [header]) for i in range(4)]
-    line = " | ".join(f"{{:{'<' if i == 0 else '>'}{w}}}" for i, w in enumerate(widths))
-    print(line.format(*header))
-    print("-+-".join("-" * w for w in widths))
-    for r in rows:
-        print(line.format(*r))
+    print("\n".join(common.format_table(("stage", "warp ms", "numpy ms", "ratio (numpy/warp)"), rows)))
     a = report["agreement"]
     print(f"numpy vs warp, max relative difference: clt {a['clt_max_rel_diff']:.2e}, "
           f"corr {a['corr_max_rel_diff']:.2e}")
@@ -265,4 +203,4 @@ def print_table(report: dict) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(common.run(main))

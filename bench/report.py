@@ -1,4 +1,5 @@
-"""Shared reporting for the accuracy benches: per-class statistics, RMSE vs 3x3 spread, table, PNG plot."""
+"""Shared by the accuracy benches (bench_accuracy, bench_network): their scene options, per-class statistics, RMSE
+vs 3x3 spread, table, PNG plot."""
 
 from __future__ import annotations
 
@@ -8,7 +9,21 @@ import numpy as np
 
 from tpnet_gpu import evaluation
 
+from .common import save_json
+
 CLASSES = ("flat", "edge", "low_texture", "all")
+
+
+def scene_arguments(parser, bench: str, *, scenes: int, width: int, height: int, seed: int) -> None:
+    """The accuracy benches' common options (with this bench's defaults): rendered scenes, their size and first
+    seed, the device, and the JSON and PNG outputs ``out/bench_<bench>.json|png`` ('' skips one)."""
+    parser.add_argument("--scenes", type=int, default=scenes)
+    parser.add_argument("--width", type=int, default=width)
+    parser.add_argument("--height", type=int, default=height)
+    parser.add_argument("--seed", type=int, default=seed)
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--json", default=f"out/bench_{bench}.json", help="output JSON path ('' to skip)")
+    parser.add_argument("--png", default=f"out/bench_{bench}.png", help="RMSE-vs-spread plot ('' to skip)")
 
 
 def summarise(scenes: list[dict], methods: list[str], reference: str | None = None) -> tuple[dict, dict]:
@@ -82,25 +97,21 @@ def plot(curves: dict, path, title: str = "") -> None:
     fig.savefig(path, dpi=110)
 
 
-def save_json(report: dict, path) -> Path:
-    """Write a bench report as JSON (parent folder created); floats that JSON lacks become numbers."""
-    import json
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(report, indent=1, default=float) + "\n")
-    return path
-
-
 def publish(scenes: list[dict], methods: list[str], title: str, reference: str, meta: dict, json_path, png_path,
             log=print) -> dict:
     """The accuracy benches' common end: statistics (with ``rmse_common`` against ``reference``), the table
-    printed, the JSON (``meta`` + stats, curves and table) and the RMSE-vs-spread PNG written. Returns the report."""
+    printed, the JSON (``meta`` + stats, curves and table) and the RMSE-vs-spread PNG written (each unless its
+    path is empty). Returns the report."""
     stats, curves = summarise(scenes, methods, reference=reference)
     lines = table(stats, title, reference=reference)
     print("\n".join(lines))
     report = {**meta, "stats": stats, "rmse_by_spread": curves, "table": lines}
-    save_json(report, json_path)
-    plot(curves, png_path, title)
-    log(f"saved {json_path} and {png_path}")
+    saved = []
+    if json_path:
+        saved.append(str(save_json(report, json_path)))
+    if png_path:
+        plot(curves, png_path, title)
+        saved.append(str(png_path))
+    if saved:
+        log(f"saved {' and '.join(saved)}")
     return report

@@ -1,21 +1,20 @@
 """Shared by the throughput bench's runs (bench_throughput.py and its helpers): the progress log, the per-stage
-timing loop and the comparison of outputs with the Warp processor's."""
+timing loop and the comparison of outputs with the Warp processor's (timing and the log itself: common.py)."""
 
 from __future__ import annotations
 
-import sys
 from typing import Callable
 
 import torch
 
-from bench_tp import timed_ms
+from . import common
+from .common import timed_ms
 
 StageFns = dict[str, Callable[[], None]]
 AGREEMENT_TOL = 1e-4  # relative to max |warp|, as the twins' tests against the reference
 
 
-def log(message: str) -> None:
-    print(f"[bench_throughput] {message}", file=sys.stderr, flush=True)
+log = common.logger("bench_throughput")  # the throughput modules all log as the bench
 
 
 def run_stages(label: str, stages: StageFns, sync: Callable[[], None] | None, repeat: int) -> tuple[dict, dict]:

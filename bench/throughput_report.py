@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import re
 
-from bench_tp import summary
-from throughput_common import AGREEMENT_TOL
+from .common import format_table, summary
+from .throughput_common import AGREEMENT_TOL
 
 # Filippov & Dzhimiev, "See far with TPNET", on a GTX 1050 Ti, one full quad frame (as quoted in the issue):
 # the whole TP 87 ms; the network 0.46 + 0.12 s (listed here beside our stage 1 and stage 2).
@@ -92,12 +92,6 @@ def targets(table: list[dict], graph: dict, gpu_name: str, is_cuda: bool, frame:
     return out
 
 
-def _fmt_table(header, rows) -> list[str]:
-    widths = [max(len(r[i]) for r in rows + [header]) for i in range(len(header))]
-    line = " | ".join(f"{{:{'<' if i == 0 else '>'}{w}}}" for i, w in enumerate(widths))
-    return [line.format(*header), "-+-".join("-" * w for w in widths)] + [line.format(*r) for r in rows]
-
-
 def print_report(report: dict) -> None:
     f, t, d = report["frame"], report["timing"], report["device"]
 
@@ -120,7 +114,7 @@ def print_report(report: dict) -> None:
             for s in report["stages"]]
     header = ("stage", "warp ms", "numpy ms", "torch ms", *(f"{c} ms" for c in taichi), "numpy/warp", "torch/warp",
               *(f"{c}/warp" for c in taichi), "fps (warp)")
-    print("\n".join(_fmt_table(header, rows)))
+    print("\n".join(format_table(header, rows)))
     print("network rows: the same PyTorch TPNet for every path, on the processor's device (listed under warp); "
           "whole-frame twins: their TP, then torch_layers + that network")
     fps = {s["name"]: s["fps"] for s in report["stages"] if s["fps"]}

@@ -11,12 +11,12 @@ import numpy as np
 import torch
 import warp as wp
 
-from bench_tp import summary, timed_ms
-from throughput_common import log
-
 from tpnet_gpu import tables
 from tpnet_gpu.net import model as net_model
 from tpnet_gpu.processor import TileProcessor
+
+from .common import random_frames, summary, timed_ms
+from .throughput_common import log
 
 SOAK_EVERY = 50  # frames between RSS samples
 
@@ -83,7 +83,7 @@ def soak(args, cfa, device, net: net_model.TPNet, frames_count: int) -> dict:
     start = time.perf_counter()
     with torch.inference_mode():
         for i in range(1, frames_count + 1):
-            frames = rng.integers(0, 4096, size=(cams, tp.height, tp.width), dtype=np.uint16).astype(np.float32)
+            frames = random_frames(rng, args.height, args.width, cams)
             target = torch.from_numpy(rng.uniform(-1.0, 5.0, size=(tp.tiles_y, tp.tiles_x)).astype(np.float32))
             result = tp.process(torch.from_numpy(frames), target)
             target_d = target.to(tp.torch_device)
@@ -101,11 +101,11 @@ def soak(args, cfa, device, net: net_model.TPNet, frames_count: int) -> dict:
     slope = float(np.polyfit(frames_at[steady], rss[steady], 1)[0]) if steady.sum() >= 2 else float("nan")
     return {
         "frames": frames_count,
-        "size": {"width": tp.width, "height": tp.height},
+        "size": {"width": args.width, "height": args.height},
         "every": SOAK_EVERY,
         "what": "fresh random frames and per-tile targets each frame; TileProcessor.process (textures on, default "
                 "graph setting) + TPNet.forward_frame on its layers (inference mode)",
-        "graph": getattr(tp, "graph", None),
+        "graph": tp.graph,
         "samples": samples,
         "first_rss_kib": int(rss[0]),
         "last_rss_kib": int(rss[-1]),

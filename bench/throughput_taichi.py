@@ -15,11 +15,11 @@ from pathlib import Path
 import torch
 import warp as wp
 
-from throughput_common import agreement, log, run_stages
-
 from tpnet_gpu.processor import TileProcessor
 
-SCRIPT = Path(__file__).resolve().parent / "bench_throughput.py"  # re-run as a worker (``--taichi-worker``)
+from .throughput_common import agreement, log, run_stages
+
+MODULE = f"{__package__}.bench_throughput"  # re-run as a worker (``--taichi-worker``): python -m MODULE
 
 
 def run_taichi(args, cfa, device, frames_t, target, net) -> dict:
@@ -82,13 +82,14 @@ def taichi_columns(args, is_cuda: bool) -> list[tuple[str, int | None]]:
 
 
 def spawn_taichi(argv: list[str], threads: int | None) -> dict:
-    """This script again in a fresh process, as a Taichi worker with ``threads`` CPU threads; returns its report."""
+    """The throughput bench again in a fresh process (``python -m``), as a Taichi worker with ``threads`` CPU
+    threads; returns its report."""
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder) / "taichi.json"
         env = dict(os.environ)
         if threads is not None:
             env["TPNET_TAICHI_THREADS"] = str(threads)
-        cmd = [sys.executable, str(SCRIPT), *argv, "--soak", "0", "--json", "",
+        cmd = [sys.executable, "-m", MODULE, *argv, "--soak", "0", "--json", "",
                "--taichi-worker", str(out)]
         done = subprocess.run(cmd, env=env)
         if done.returncode != 0:

@@ -44,12 +44,6 @@ def test_help_lists_subcommands():
         assert command in done.stdout
 
 
-def test_bench_wrapper_runs_a_script(tmp_path, capsys):
-    json_path = tmp_path / "tp.json"
-    assert main(["bench", "tp", "--height", "32", "--width", "48", "--repeat", "1", "--json", str(json_path)]) == 0
-    assert "convert" in capsys.readouterr().out and json_path.exists()
-
-
 def test_command_defaults_are_the_configs():
     # Oracle: the config dataclasses, the one home of every default (tpnet_gpu/config.py).
     from tpnet_gpu import cli

@@ -122,19 +122,14 @@ BENCHES = ("tp", "accuracy", "network", "throughput")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    import runpy
-    from pathlib import Path
+    import importlib
 
-    script = Path(__file__).resolve().parent.parent / "bench" / f"bench_{args.name}.py"
-    if not script.exists():
-        raise FileNotFoundError(f"{script}: the benches live in the source checkout's bench/ folder "
-                                "(install with `pip install -e .` from a clone)")
-    sys.argv = [str(script), *args.args]
-    try:
-        runpy.run_path(str(script), run_name="__main__")
-    except SystemExit as done:
-        return int(done.code or 0)
-    return 0
+    from tpnet_gpu.bench import common
+
+    # tpnet_gpu.bench.bench_NAME.main(args): its --help, a bad option or a missing optional dependency (the
+    # ``bench`` extra) end with argparse's status or a one-line message (common.run), not a traceback.
+    module = importlib.import_module(f"tpnet_gpu.bench.bench_{args.name}")
+    return common.run(module.main, args.args)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -206,11 +201,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="loss weight of the random-offset (+-2 px) targets relative to the others")
     tr.set_defaults(func=_cmd_train)
 
-    bench = sub.add_parser("bench", help="run a benchmark script of bench/ (table + JSON)",
-                           description="Runs bench/bench_NAME.py with the remaining arguments, e.g. "
-                                       "`tpnet bench tp --height 480 --width 640`.")
+    bench = sub.add_parser("bench", help="run a benchmark of tpnet_gpu.bench (table + JSON)",
+                           description="Runs tpnet_gpu.bench.bench_NAME (also `python -m tpnet_gpu.bench.bench_NAME`) "
+                                       "with the remaining arguments, e.g. `tpnet bench tp --height 480 --width 640`.")
     bench.add_argument("name", choices=BENCHES, help="which benchmark")
-    bench.add_argument("args", nargs=argparse.REMAINDER, help="arguments for the script (see its --help)")
+    bench.add_argument("args", nargs=argparse.REMAINDER,
+                       help="arguments for the benchmark (see `tpnet bench NAME --help`)")
     bench.set_defaults(func=_cmd_bench)
     return parser
 

@@ -1,26 +1,20 @@
-"""The benchmark's plain-PyTorch peer (bench/torch_tp.py) against the golden float64 reference (CPU tensors).
+"""The benchmark's plain-PyTorch peer (tpnet_gpu.bench.twins.torch_tp, bench/twins/torch_tp.py) against the golden
+float64 reference (CPU tensors).
 
 Oracle: tpnet_gpu.reference (bayer_planes + convert_tiles per camera, correlate per pair), through the helpers of
-tests/test_bench_numpy.py (same random cases: windows partly and wholly off the image, round-half corners).
+tests/bench/twins/test_numpy_tp.py (same random cases: windows partly and wholly off the image, round-half corners).
 Tolerance: max |torch - reference| <= 1e-4 x max |reference| (the peer is float32 throughout).
 """
-
-import ast
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
-from tests.test_bench_numpy import CAMS, TOL, random_case, reference_clt, relative_error
+from tests.bench.twins.test_numpy_tp import (
+    CAMS, CORRELATE_CASES, TOL, imported_names, random_case, reference_clt, relative_error)
 from tpnet_gpu import reference as ref
 from tpnet_gpu import tables
-
-BENCH_FILE = Path(__file__).resolve().parents[1] / "bench" / "torch_tp.py"
-_spec = importlib.util.spec_from_file_location("bench_torch_tp", BENCH_FILE)
-torch_tp = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(torch_tp)
+from tpnet_gpu.bench.twins import torch_tp
 
 
 @pytest.fixture(autouse=True)
@@ -51,16 +45,7 @@ def test_convert_accepts_arrays_and_integer_frames():
     assert relative_error(got.numpy(), reference_clt(frames.astype(np.float32), centres, "GRBG")) <= TOL
 
 
-@pytest.mark.parametrize(
-    "cfa, pairs, inside, kwargs",
-    [
-        ("GRBG", tables.QUAD_PAIRS, False, dict(colour_weights=(0.25, 0.25, 0.5), fat_zero=30.0, sigma_rb=0.5,
-                                                sigma_corr=0.9)),
-        ("GRBG", [(1, 0), (3, 2)], True, dict(colour_weights=(0.5, 0.2, 0.3), fat_zero=0.0, sigma_rb=0.7,
-                                              sigma_corr=1.2)),
-        (None, tables.QUAD_PAIRS, False, dict(colour_weights=(1.0,), fat_zero=5.0, sigma_rb=0.5, sigma_corr=0.15)),
-    ],
-)
+@pytest.mark.parametrize("cfa, pairs, inside, kwargs", CORRELATE_CASES)
 @pytest.mark.parametrize("chunk", [None, 9])
 def test_correlate_equals_reference(cfa, pairs, inside, kwargs, chunk):
     # Input: the reference CLT rounded to float32, so this checks the correlate stage alone.
@@ -92,10 +77,7 @@ def test_full_pipeline_defaults_equal_reference(cfa):
 
 
 def test_peer_does_not_import_the_reference():
-    tree = ast.parse(BENCH_FILE.read_text())
-    names = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
-    names += [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
-    names += [f"{n.module}.{a.name}" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) for a in n.names]
+    names = imported_names(torch_tp)  # (its shared twins.common: checked in test_numpy_tp)
     assert not [m for m in names if m.startswith("tpnet_gpu.reference")], names
 
 

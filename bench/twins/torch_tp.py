@@ -1,12 +1,13 @@
 """Plain-PyTorch-ops float32 tile processor: the convert and correlate stages as ordinary torch tensor ops.
 
-The same math as ``bench/numpy_tp.py`` (and ``kernels/convert.py``, ``kernels/correlate.py``; tile_processor.md
-§1.4, §3.1, §6.2, §6.3), written with batched matmuls over all tiles, so that one implementation runs on CPU and
-CUDA tensors alike: everything happens on the device of the input tensors, with no host copies inside (the small
-constant tables are built once per device and dtype with NumPy and cached). It is the "what a PyTorch user would
-write" peer of the Warp kernels in the benchmarks. Not the oracle: that is ``tpnet_gpu.reference`` (float64),
-which this module deliberately does not import (tests/test_bench_torch.py checks both). No aberration kernels,
-no validity masks: inputs must be finite.
+The same math as ``bench/twins/numpy_tp.py`` (and ``kernels/convert.py``, ``kernels/correlate.py``;
+tile_processor.md §1.4, §3.1, §6.2, §6.3), written with batched matmuls over all tiles, so that one implementation
+runs on CPU and CUDA tensors alike: everything happens on the device of the input tensors, with no host copies
+inside (the small constant tables are built once per device and dtype with NumPy and cached: the colour masks and
+the lag matrix from ``tpnet_gpu.operators``, the basis expansion, product signs and correlation weights from
+``twins/common.py``). It is the "what a PyTorch user would write" peer of the Warp kernels in the benchmarks. Not
+the oracle: that is ``tpnet_gpu.reference`` (float64), which this module deliberately does not import
+(tests/bench/twins/test_torch_tp.py checks both). No aberration kernels, no validity masks: inputs must be finite.
 
 Convert, per camera (tiles in chunks):
     p = centre - 8, itl = floor(p + 0.5), s = itl - p
@@ -14,7 +15,7 @@ Convert, per camera (tiles in chunks):
     x_c = x * mask_c (zero-fill Bayer mask of colour c = R, B, G, green scaled by 0.5; mono: no mask)
     [F_CC F_SC; F_CS F_SS] = Bv^T @ x_c @ Bh   (Bv, Bh: (16, [phi, k]) per-tile bases, phi = cos, sin)
 with the closed-form bases B[n, (phi, k)] = 1/2 w(n + s) phi(omega_k (n + s + 4.5)) of every tile from one GEMM
-(features of cos/sin(pi s / 16) and cos/sin(omega_k s) times a fixed expansion; see numpy_tp._basis).
+(features of cos/sin(pi s / 16) and cos/sin(omega_k s) times a fixed expansion; see twins.common.basis_expansion).
 
 Correlate, per pair (tiles in chunks): P_ij = sum_c weight_c A_ci B_cj per frequency (weights w_R, w_B times
 L(sigma_rb), w_G), X = signs @ P (the conjugate bicomplex product, §6.2), the fat-zero normalisation, L(sigma_corr);
@@ -28,19 +29,14 @@ into non-contiguous outputs fall back to a per-matrix loop).
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/: the NumPy twin's tables are shared
-from numpy_tp import _basis_expansion, _colour_masks, _conj_product_signs, _lag_matrix  # noqa: E402
-from tpnet_gpu import tables
+from tpnet_gpu import operators, tables
+from tpnet_gpu.layout import HALF_TILE, NET_CROP
 
-N = tables.DTT_SIZE  # 8
-WIN = tables.TILE_SIZE  # 16
-SIDE = 2 * tables.CORR_RADIUS + 1  # 15
+from .common import N, SIDE, WIN, basis_expansion, conj_product_signs, correlation_weights
+
 CPU_CHUNK = 1024  # tiles per chunk on CPU: the work buffers (~3 MB each) stay in cache
 
 __all__ = ["torch_convert", "torch_correlate", "torch_layers"]
@@ -71,7 +67,7 @@ def _basis(s: torch.Tensor, out: torch.Tensor) -> torch.Tensor:
     """Per-tile forward bases into ``out (T, 16, 16)`` [n, (phi, k)] of residuals ``s (T,)``: one GEMM (see module
     doc)."""
     omega = _constant("omega", tables.omega, s.device)
-    expansion = _constant("basis_expansion", _basis_expansion, s.device)
+    expansion = _constant("basis_expansion", basis_expansion, s.device)
     beta = (s * np.float32(np.pi / 16))[:, None]  # (T, 1)
     gamma = s[:, None] * omega[None, :]  # (T, 8)
     cb, sb, cg, sg = torch.cos(beta), torch.sin(beta), torch.cos(gamma), torch.sin(gamma)
@@ -104,7 +100,8 @@ def torch_convert(frames, centres, cfa: str | None = tables.DEFAULT_CFA, *, chun
                          f"{tuple(frames.shape)} and {tuple(centres.shape)}")
     cams, height, width = frames.shape
     tiles = centres.shape[0]
-    masks = _constant(f"masks_{cfa}", lambda: _colour_masks(cfa).transpose(0, 2, 1, 3), device)  # (4, 16, C, 16)
+    masks = _constant(f"masks_{cfa}", lambda: operators.colour_masks(cfa).transpose(0, 2, 1, 3),
+                      device)  # (4, 16, C, 16)
     colours = masks.shape[2]
     clt = torch.empty((tiles, cams, colours, 4, N, N), dtype=torch.float32, device=device)
     if tiles == 0:
@@ -123,7 +120,7 @@ def torch_convert(frames, centres, cfa: str | None = tables.DEFAULT_CFA, *, chun
     for start in range(0, tiles, step):
         part = slice(start, min(start + step, tiles))
         t = part.stop - part.start
-        p = centres[part] - np.float32(N)  # (t, cams, 2)
+        p = centres[part] - np.float32(HALF_TILE)  # (t, cams, 2)
         itl_f = torch.floor(p + np.float32(0.5))
         s = itl_f - p  # float32 residuals, as in the kernels
         itl = itl_f.to(torch.int64)
@@ -171,25 +168,16 @@ def torch_correlate(
         raise ValueError(f"clt: expected (tiles, cams, 1 or 3, 4, 8, 8), got {tuple(clt.shape)}")
     tiles, _, colours = clt.shape[:3]
     device = clt.device
-    if colour_weights is None:
-        colour_weights = tables.CORR_COLOUR_WEIGHTS if colours == 3 else (1.0,)
-    if sigma_corr is None:
-        sigma_corr = tables.CORR_SIGMA if colours == 3 else tables.CORR_SIGMA_MONO
-    if len(colour_weights) != colours:
-        raise ValueError(f"colour_weights: expected {colours} values, got {len(colour_weights)}")
     pairs = [(int(a), int(b)) for a, b in pairs]
-
-    def make_weights() -> np.ndarray:  # (C, 64): X = (w_R P_R + w_B P_B) L_rb + w_G P_G
-        weights = np.array(colour_weights, dtype=np.float64)[:, None, None] * np.ones((colours, N, N))
-        if colours == 3:
-            weights[:2] *= tables.lpf(sigma_rb)
-        return weights.reshape(colours, N * N)
-
-    key = f"{tuple(float(w) for w in colour_weights)}_{float(sigma_rb)}"
-    weights = _constant(f"weights_{key}", make_weights, device)
-    lpf_corr = _constant(f"lpf_{float(sigma_corr)}", lambda: tables.lpf(sigma_corr).reshape(N * N), device)
-    signs = _constant("signs", _conj_product_signs, device)
-    to_lags = _constant("lags", _lag_matrix, device)
+    # (C, 64) and (64,): X = (w_R P_R + w_B P_B) L_rb + w_G P_G, then L_corr (defaults resolved and checked there)
+    key = (colours, None if colour_weights is None else tuple(float(w) for w in colour_weights), float(sigma_rb),
+           None if sigma_corr is None else float(sigma_corr))
+    weights = _constant(f"weights_{key}", lambda: correlation_weights(colours, colour_weights, sigma_rb, sigma_corr)[0],
+                        device)
+    lpf_corr = _constant(f"lpf_{key}", lambda: correlation_weights(colours, colour_weights, sigma_rb, sigma_corr)[1],
+                         device)
+    signs = _constant("signs", conj_product_signs, device)
+    to_lags = _constant("lags", operators.lag_matrix, device)
     fz2 = float(np.float32(fat_zero) ** 2)
     npairs = len(pairs)
     corr = torch.empty((tiles, npairs, SIDE * SIDE), dtype=torch.float32, device=device)
@@ -236,8 +224,7 @@ def torch_layers(corr, offset: float = tables.NET_CORR_OFFSET) -> torch.Tensor:
     corr = torch.as_tensor(corr)
     if corr.dim() != 4 or tuple(corr.shape[1:]) != (len(tables.QUAD_PAIRS), SIDE, SIDE):
         raise ValueError(f"corr: expected (tiles, 6, {SIDE}, {SIDE}) quad pair correlations, got {tuple(corr.shape)}")
-    crop = tables.CORR_RADIUS - tables.NET_RADIUS
-    c = corr[:, :, crop : SIDE - crop, crop : SIDE - crop].to(torch.float32)  # (tiles, 6, 9, 9)
+    c = corr[:, :, NET_CROP : SIDE - NET_CROP, NET_CROP : SIDE - NET_CROP].to(torch.float32)  # (tiles, 6, 9, 9)
     a, b = c[:, 0:4:2], c[:, 1:4:2]  # (pair 0, pair 2) and (pair 1, pair 3)
     if offset < 0:
         combined = 0.5 * (a + b)

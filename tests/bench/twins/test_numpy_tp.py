@@ -1,4 +1,5 @@
-"""The benchmark's NumPy peer (bench/numpy_tp.py) against the golden float64 reference.
+"""The benchmark's NumPy peer (tpnet_gpu.bench.twins.numpy_tp, bench/twins/numpy_tp.py) against the golden float64
+reference.
 
 Oracle: tpnet_gpu.reference (bayer_planes + convert_tiles per camera, correlate per pair).
 Tolerance: max |numpy - reference| <= 1e-4 x max |reference| (the peer is float32 throughout).
@@ -13,11 +14,8 @@ import pytest
 
 from tpnet_gpu import reference as ref
 from tpnet_gpu import tables
-
-BENCH_FILE = Path(__file__).resolve().parents[1] / "bench" / "numpy_tp.py"
-_spec = importlib.util.spec_from_file_location("bench_numpy_tp", BENCH_FILE)
-numpy_tp = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(numpy_tp)
+from tpnet_gpu.bench.twins import common as twins_common
+from tpnet_gpu.bench.twins import numpy_tp
 
 H, W, CAMS = 48, 64, 4
 TOL = 1e-4
@@ -68,16 +66,17 @@ def test_convert_equals_reference(cfa):
     assert relative_error(got, want) <= TOL
 
 
-@pytest.mark.parametrize(
-    "cfa, pairs, inside, kwargs",
-    [
-        ("GRBG", tables.QUAD_PAIRS, False, dict(colour_weights=(0.25, 0.25, 0.5), fat_zero=30.0, sigma_rb=0.5,
-                                                sigma_corr=0.9)),
-        ("GRBG", [(1, 0), (3, 2)], True, dict(colour_weights=(0.5, 0.2, 0.3), fat_zero=0.0, sigma_rb=0.7,
-                                              sigma_corr=1.2)),
-        (None, tables.QUAD_PAIRS, False, dict(colour_weights=(1.0,), fat_zero=5.0, sigma_rb=0.5, sigma_corr=0.15)),
-    ],
-)
+# (cfa, pairs, inside, correlation parameters): the correlate-stage cases of both twins' tests.
+CORRELATE_CASES = [
+    ("GRBG", tables.QUAD_PAIRS, False, dict(colour_weights=(0.25, 0.25, 0.5), fat_zero=30.0, sigma_rb=0.5,
+                                            sigma_corr=0.9)),
+    ("GRBG", [(1, 0), (3, 2)], True, dict(colour_weights=(0.5, 0.2, 0.3), fat_zero=0.0, sigma_rb=0.7,
+                                          sigma_corr=1.2)),
+    (None, tables.QUAD_PAIRS, False, dict(colour_weights=(1.0,), fat_zero=5.0, sigma_rb=0.5, sigma_corr=0.15)),
+]
+
+
+@pytest.mark.parametrize("cfa, pairs, inside, kwargs", CORRELATE_CASES)
 def test_correlate_equals_reference(cfa, pairs, inside, kwargs):
     # Input: the reference CLT rounded to float32, so this checks the correlate stage alone.
     frames, centres = random_case(2, inside=inside)
@@ -106,9 +105,25 @@ def test_full_pipeline_defaults_equal_reference():
     assert relative_error(got, want) <= TOL
 
 
-def test_peer_does_not_import_the_reference():
-    tree = ast.parse(BENCH_FILE.read_text())
+def imported_names(module) -> list[str]:
+    """Every module and name ``module``'s source imports, relative imports resolved to absolute names."""
+    tree = ast.parse(Path(module.__file__).read_text())
     names = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
-    names += [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
-    names += [f"{n.module}.{a.name}" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) for a in n.names]
+    for n in ast.walk(tree):
+        if isinstance(n, ast.ImportFrom):
+            base = importlib.util.resolve_name("." * n.level + (n.module or ""), module.__package__) if n.level \
+                else n.module
+            names += [base] + [f"{base}.{a.name}" for a in n.names]
+    return names
+
+
+def test_imported_names_sees_relative_imports():
+    # The check below must not miss ``from ... import reference`` written relative to the twins' package.
+    assert "tpnet_gpu.bench.twins.common.basis_expansion" in imported_names(numpy_tp)
+    assert "tpnet_gpu.operators" in imported_names(numpy_tp)
+
+
+@pytest.mark.parametrize("module", [numpy_tp, twins_common], ids=lambda m: m.__name__.rpartition(".")[2])
+def test_peer_does_not_import_the_reference(module):
+    names = imported_names(module)
     assert not [m for m in names if m.startswith("tpnet_gpu.reference")], names

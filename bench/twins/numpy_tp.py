@@ -3,7 +3,8 @@
 Same math as ``kernels/convert.py`` and ``kernels/correlate.py`` (tile_processor.md §1.4, §3.1, §6.2, §6.3), batched
 over all tiles with matrix products; Python loops run only over cameras, pairs and quadrants. Float32
 throughout. Not the oracle: that is ``tpnet_gpu.reference`` (float64), which this module deliberately does not
-import (tests/test_bench_numpy.py checks both). No aberration kernels, no validity masks: inputs must be finite.
+import (tests/bench/twins/test_numpy_tp.py checks both). No aberration kernels, no validity masks: inputs must be
+finite.
 
 Convert, per camera (all tiles at once):
     p = centre - 8, itl = floor(p + 0.5), s = itl - p
@@ -20,7 +21,10 @@ one matmul with their signs -, the fat-zero normalisation, L(sigma_corr), then o
 (256 -> 225) frequency-to-lag matrix sum_q kron(L_{q>>1}, L_{q&1}) (§6.3).
 
 Work buffers are allocated once per call and reused across cameras / pairs: fresh large temporaries cost a page
-fault per 4 KiB on every use, which on small VMs is a visible share of the run time.
+fault per 4 KiB on every use, which on small VMs is a visible share of the run time. The colour masks and the
+frequency-to-lag matrix are the project's operators (``tpnet_gpu.operators``), the sizes and the frame padding
+``PAD`` its layout (``tpnet_gpu.layout``); the basis expansion, the product signs and the correlation weights are
+shared with the PyTorch twin (``twins/common.py``).
 """
 
 from __future__ import annotations
@@ -28,12 +32,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from tpnet_gpu import tables
+from tpnet_gpu import operators, tables
+from tpnet_gpu.layout import HALF_TILE, PAD
 
-N = tables.DTT_SIZE  # 8
-WIN = tables.TILE_SIZE  # 16
-SIDE = 2 * tables.CORR_RADIUS + 1  # 15
-PAD = 18  # even (keeps the Bayer parity) and >= 17 (any window corner can be moved onto the padded frame)
+from .common import N, SIDE, WIN, basis_expansion, conj_product_signs, correlation_weights
 
 __all__ = ["numpy_convert", "numpy_correlate"]
 
@@ -41,7 +43,7 @@ __all__ = ["numpy_convert", "numpy_correlate"]
 # --- convert ----------------------------------------------------------------------------------------------------
 def _split_centres(centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Integer window corner (int64) and residual s (float32) of centres ``(T, 2)`` (x, y), float32 arithmetic."""
-    p = centres - np.float32(N)
+    p = centres - np.float32(HALF_TILE)
     itl = np.floor(p + np.float32(0.5))
     return itl.astype(np.int64), itl - p
 
@@ -69,57 +71,15 @@ def _windows(frame: np.ndarray, itl: np.ndarray) -> np.ndarray:
     return views[_padded_corner(itl[:, 1], height), _padded_corner(itl[:, 0], width)]
 
 
-def _colour_masks(cfa: str | None) -> np.ndarray:
-    """Zero-fill masks ``(4, colours, 16, 16)`` per window-corner parity 2 (itl_y & 1) + (itl_x & 1); G carries 0.5.
-
-    Mono (``cfa`` None): one all-ones colour.
-    """
-    if cfa is None:
-        return np.ones((4, 1, WIN, WIN), dtype=np.float32)
-    scale = np.array([1.0, 1.0, tables.GREEN_PRESCALE], dtype=np.float32)
-    colour = tables.cfa_colour_index(cfa, WIN + 2, WIN + 2)
-    masks = np.zeros((4, 3, WIN, WIN), dtype=np.float32)
-    for parity in range(4):
-        py, px = parity >> 1, parity & 1
-        window = colour[py : py + WIN, px : px + WIN]
-        for c in range(3):
-            masks[parity, c] = np.where(window == c, scale[c], 0.0)
-    return masks
-
-
-def _basis_expansion() -> np.ndarray:
-    """Fixed ``(32, 256)`` matrix E with basis(s).flat = features(s) @ E (see ``_basis``), float64 -> float32.
-
-    With alpha_n = pi (2n + 1) / 32, theta_nk = omega_k (n + 4.5), beta = pi s / 16 and gamma_k = omega_k s:
-    1/2 w(n + s) cos|sin(omega_k (n + s + 4.5)) = 1/2 sin(alpha_n + beta) cos|sin(theta_nk + gamma_k), which the
-    angle-sum formulas expand into 4 products cos|sin(beta) x cos|sin(gamma_k) with fixed coefficients.
-    """
-    n = np.arange(WIN)[:, None]
-    alpha = np.pi * (2 * n + 1) / 32.0  # (16, 1)
-    theta = (n + 4.5) * tables.omega()[None, :]  # (16, 8)
-    sa, ca, st, ct = np.sin(alpha), np.cos(alpha), np.sin(theta), np.cos(theta)
-    coef = 0.5 * np.array(
-        [  # [feature, phi = cos | sin, n, k]
-            [sa * ct, sa * st],  # cos(beta) cos(gamma_k)
-            [-sa * st, sa * ct],  # cos(beta) sin(gamma_k)
-            [ca * ct, ca * st],  # sin(beta) cos(gamma_k)
-            [-ca * st, ca * ct],  # sin(beta) sin(gamma_k)
-        ]
-    )
-    # Feature (j, k') feeds only the columns of frequency k = k': [j, k', n, phi, k].
-    expansion = np.einsum("jpnk,kl->jlnpk", coef, np.eye(N))
-    return expansion.reshape(4 * N, WIN * 2 * N).astype(np.float32)
-
-
-_BASIS_EXPANSION = _basis_expansion()
+_BASIS_EXPANSION = basis_expansion().astype(np.float32)
 
 
 def _basis(s: np.ndarray, out: np.ndarray) -> np.ndarray:
     """Per-tile forward bases into ``out (T, 16, 16)`` [n, (phi, k)] = 1/2 w(n + s) phi(omega_k (n + s + 4.5)).
 
     One GEMM: features (T, 32) = [cos b cos g_k, cos b sin g_k, sin b cos g_k, sin b sin g_k] (b = pi s / 16,
-    g_k = omega_k s) times the fixed expansion (``_basis_expansion``). Only 9 angles per tile are evaluated and
-    the phase omega_k (n + 4.5) stays exact (float64 table).
+    g_k = omega_k s) times the fixed expansion (``twins.common.basis_expansion``). Only 9 angles per tile are
+    evaluated and the phase omega_k (n + 4.5) stays exact (float64 table).
     """
     beta = (np.float32(np.pi / 16) * s)[:, None, None]  # (T, 1, 1)
     gamma = (s[:, None] * tables.omega().astype(np.float32)[None, :])[:, None, :]  # (T, 1, 8)
@@ -144,7 +104,7 @@ def numpy_convert(frames, centres, cfa: str | None = tables.DEFAULT_CFA) -> np.n
         )
     cams = frames.shape[0]
     tiles = centres.shape[0]
-    masks = _colour_masks(cfa)
+    masks = operators.colour_masks(cfa).astype(np.float32)
     colours = masks.shape[1]
     clt = np.empty((tiles, cams, colours, 4, N, N), dtype=np.float32)
     # Work buffers, reused for every camera.
@@ -169,30 +129,7 @@ def numpy_convert(frames, centres, cfa: str | None = tables.DEFAULT_CFA) -> np.n
 
 
 # --- correlate --------------------------------------------------------------------------------------------------
-def _conj_product_signs() -> np.ndarray:
-    """Signs ``(4, 16)`` [q, (i, j)] of conj(A) * B per frequency (§6.2): X_q = sum_ij signs[q, ij] A_i B_j."""
-    terms = (
-        ((0, 0, 1), (1, 1, 1), (2, 2, 1), (3, 3, 1)),  # CC = A0 B0 + A1 B1 + A2 B2 + A3 B3
-        ((0, 1, 1), (1, 0, -1), (2, 3, 1), (3, 2, -1)),  # SC = A0 B1 - A1 B0 + A2 B3 - A3 B2
-        ((0, 2, 1), (2, 0, -1), (1, 3, 1), (3, 1, -1)),  # CS = A0 B2 - A2 B0 + A1 B3 - A3 B1
-        ((0, 3, 1), (3, 0, 1), (1, 2, -1), (2, 1, -1)),  # SS = A0 B3 + A3 B0 - A1 B2 - A2 B1
-    )
-    signs = np.zeros((4, 4, 4), dtype=np.float32)
-    for q, quadrant in enumerate(terms):
-        for i, j, sign in quadrant:
-            signs[q, i, j] = sign
-    return signs.reshape(4, 16)
-
-
-_CONJ_PRODUCT_SIGNS = _conj_product_signs()
-
-
-def _lag_matrix() -> np.ndarray:
-    """Fixed frequency-to-lag map ``(256, 225)``: corr.flat = X.flat @ M, with
-    corr = sum_q L_{q>>1} X_q L_{q&1}^T and L_sine = 1/2 unfold(sine, 7) @ dtt2e(sine), ``(15, 8)`` (§6.3)."""
-    lags = [0.5 * tables.unfold_matrix(sine, tables.CORR_RADIUS) @ tables.dtt2e_matrix(sine) for sine in (False, True)]
-    m = np.stack([np.einsum("ma,nb->abmn", lags[q >> 1], lags[q & 1]) for q in range(4)])  # [q, ky, kx, my, mx]
-    return m.reshape(4 * N * N, SIDE * SIDE).astype(np.float32)
+_CONJ_PRODUCT_SIGNS = conj_product_signs().astype(np.float32)
 
 
 def numpy_correlate(
@@ -213,20 +150,11 @@ def numpy_correlate(
     if clt.ndim != 6 or clt.shape[2] not in (1, 3) or clt.shape[3:] != (4, N, N):
         raise ValueError(f"clt: expected (tiles, cams, 1 or 3, 4, 8, 8), got {clt.shape}")
     tiles, _, colours = clt.shape[:3]
-    if colour_weights is None:
-        colour_weights = tables.CORR_COLOUR_WEIGHTS if colours == 3 else (1.0,)
-    if sigma_corr is None:
-        sigma_corr = tables.CORR_SIGMA if colours == 3 else tables.CORR_SIGMA_MONO
-    if len(colour_weights) != colours:
-        raise ValueError(f"colour_weights: expected {colours} values, got {len(colour_weights)}")
     # X = (w_R P_R + w_B P_B) L_rb + w_G P_G = sum_c weight_c P_c with per-frequency weights (C, 64).
-    weights = np.array(colour_weights, dtype=np.float64)[:, None, None] * np.ones((colours, N, N))
-    if colours == 3:
-        weights[:2] *= tables.lpf(sigma_rb)
-    weights = weights.astype(np.float32).reshape(colours, N * N)
-    lpf_corr = tables.lpf(sigma_corr).astype(np.float32).reshape(N * N)
+    weights, lpf_corr = (w.astype(np.float32) for w in correlation_weights(colours, colour_weights, sigma_rb,
+                                                                             sigma_corr))
     fz2 = np.float32(fat_zero) ** 2
-    to_lags = _lag_matrix()
+    to_lags = operators.lag_matrix().astype(np.float32)
     corr = np.empty((tiles, len(pairs), SIDE * SIDE), dtype=np.float32)
     # Work buffers, reused for every pair.
     products = np.empty((tiles, 4, 4, N * N), dtype=np.float32)  # [i, j]: sum_c weight_c A_i B_j

@@ -1,0 +1,148 @@
+"""Every bench of tpnet_gpu.bench run end to end at a tiny size (as Warp's test suite runs its examples): its
+``main(argv)`` returns the report, prints its table, logs progress to stderr and writes the same report as JSON;
+``tpnet bench NAME`` reaches the same ``main``. Oracle: the report layout each bench documents (its keys), and for
+the speed benches the agreement of the twins with the Warp processor (their own tolerance, 1e-4 of max |warp|).
+The accuracy bench needs the optional ``bench`` extra (OpenCV) and skips without it."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import pkgutil
+import subprocess
+import sys
+
+import pytest
+import torch
+
+import tpnet_gpu.bench
+from tpnet_gpu import cli
+from tpnet_gpu.bench import bench_network, bench_throughput, bench_tp, common
+from tpnet_gpu.bench.throughput_report import ROWS
+
+TINY = ["--height", "32", "--width", "48", "--repeat", "1", "--device", "cpu"]  # 4 x 6 tiles
+SPEED_KEYS = {"frame", "timing", "stages", "device", "machine", "paper", "agreement"}
+ACCURACY_KEYS = {"bench", "scenes", "width", "height", "seed", "machine", "stats", "rmse_by_spread", "table"}
+CLASSES = {"flat", "edge", "low_texture", "all"}
+
+
+@pytest.fixture(autouse=True)
+def keep_torch_state():
+    """The throughput bench seeds torch's RNG (and may set its thread count): restored for the other tests."""
+    threads = torch.get_num_threads()
+    with torch.random.fork_rng(devices=[]):
+        yield
+    torch.set_num_threads(threads)
+
+
+def run_bench(module, argv, tmp_path, capsys) -> tuple[dict, str, str]:
+    """``module.main(argv + --json)``: (returned report, stdout, stderr); the JSON file must hold the same report."""
+    path = tmp_path / f"{module.__name__.rpartition('.')[2]}.json"
+    report = module.main([*argv, "--json", str(path)])
+    out, err = capsys.readouterr()
+    assert isinstance(report, dict)
+    assert json.loads(path.read_text()) == json.loads(json.dumps(report, default=float))
+    return report, out, err
+
+
+def test_bench_tp(tmp_path, capsys):
+    report, out, err = run_bench(bench_tp, TINY, tmp_path, capsys)
+    assert SPEED_KEYS | {"total", "warp_setup_ms", "warp_first_prepare_ms", "warp_process_ms"} <= set(report)
+    assert [s["name"] for s in report["stages"]] == ["convert", "correlate", "texture"]
+    assert report["frame"]["tiles"] == 24 and report["frame"]["width"] == 48 and report["frame"]["height"] == 32
+    assert report["agreement"]["clt_max_rel_diff"] < 1e-4 and report["agreement"]["corr_max_rel_diff"] < 1e-4
+    assert {"cpu_model", "numpy", "warp", "torch", "thread_env"} <= set(report["machine"])
+    assert "stage" in out and "convert" in out and "paper:" in out
+    assert "[bench_tp] wrote" in err  # progress through common.logger, on stderr
+
+
+def _check_throughput(report: dict, columns: list[str]) -> None:
+    assert SPEED_KEYS | {"columns", "graph_replay", "targets", "soak"} <= set(report)
+    assert report["columns"] == columns
+    assert [s["name"] for s in report["stages"]] == [name for name, _ in ROWS]
+    for impl in columns[1:]:
+        for name, stats in report["agreement"][impl].items():
+            assert stats["max_rel_diff"] < 1e-4, (impl, name)
+    assert report["agreement"]["network_split_vs_forward_frame_max_abs_diff"] < 1e-5
+
+
+def test_bench_throughput_without_taichi(tmp_path, capsys):
+    report, out, err = run_bench(bench_throughput, [*TINY, "--no-taichi", "--soak", "2"], tmp_path, capsys)
+    _check_throughput(report, ["warp", "numpy", "torch"])
+    assert report["soak"]["frames"] == 2 and report["soak"]["size"] == {"width": 48, "height": 32}
+    assert report["graph_replay"]["available"]
+    assert "TP+network whole frame" in out and "[bench_throughput]" in err
+
+
+@pytest.mark.slow
+def test_bench_throughput_taichi_worker(tmp_path, capsys):
+    # One Taichi column: a worker process started as `python -m tpnet_gpu.bench.bench_throughput`.
+    report, out, _ = run_bench(bench_throughput, [*TINY, "--taichi-threads", "1"], tmp_path, capsys)
+    _check_throughput(report, ["warp", "numpy", "torch", "taichi-1t"])
+    assert report["timing"]["taichi_setup"]["taichi-1t"]["threads"] == 1
+    assert "taichi-1t ms" in out
+
+
+@pytest.mark.slow
+def test_bench_accuracy(tmp_path, capsys):
+    pytest.importorskip("cv2", reason="bench_accuracy's peers need OpenCV (the optional 'bench' extra)")
+    from tpnet_gpu.bench import bench_accuracy
+
+    png = tmp_path / "accuracy.png" if importlib.util.find_spec("matplotlib") else None
+    # 128x64: SGBM needs an image wider than its disparity range; one re-centring pass keeps the peers short.
+    argv = ["--scenes", "1", "--height", "64", "--width", "128", "--peer-passes", "1", "--png", str(png or "")]
+    report, out, err = run_bench(bench_accuracy, argv, tmp_path, capsys)
+    assert ACCURACY_KEYS | {"peer_passes", "optics", "sensor"} <= set(report)
+    assert list(report["stats"]) == ["baseline (G phase correlation)", "baseline (as-coded colour weights)",
+                                     "opencv-StereoSGBM", "opencv-phaseCorrelate", "skimage-phase_cross_correlation"]
+    assert all(set(s) == CLASSES for s in report["stats"].values())
+    assert report["table"][0] in out and "[bench_accuracy]" in err
+    assert png is None or png.stat().st_size > 0
+
+
+def test_bench_network(tmp_path, capsys):
+    png = tmp_path / "network.png" if importlib.util.find_spec("matplotlib") else None
+    argv = ["--scenes", "1", "--passes", "1", "--height", "64", "--width", "64", "--png", str(png or "")]
+    report, out, err = run_bench(bench_network, argv, tmp_path, capsys)
+    assert ACCURACY_KEYS | {"passes"} <= set(report)
+    assert list(report["stats"]) == ["LMA baseline", "TPNET (1 pass)"]
+    assert all(set(s) == CLASSES for s in report["stats"].values())
+    assert report["table"][0] in out and "[bench_network]" in err
+    assert png is None or png.stat().st_size > 0
+
+
+def test_every_bench_module_is_a_cli_choice():
+    names = {m.name.removeprefix("bench_") for m in pkgutil.iter_modules(tpnet_gpu.bench.__path__)
+             if m.name.startswith("bench_")}
+    assert names == set(cli.BENCHES)
+
+
+def test_cli_runs_a_bench_by_import(tmp_path, capsys):
+    json_path = tmp_path / "tp.json"
+    assert cli.main(["bench", "tp", *TINY, "--json", str(json_path)]) == 0
+    assert "convert" in capsys.readouterr().out
+    assert set(json.loads(json_path.read_text())) >= SPEED_KEYS
+
+
+def test_cli_bench_help_bad_options_and_unknown_name(capsys):
+    assert cli.main(["bench", "tp", "--help"]) == 0
+    assert "usage: tpnet bench tp" in capsys.readouterr().out
+    assert cli.main(["bench", "tp", "--repeat", "0"]) == 2
+    assert "tpnet bench tp: error: --repeat: expected at least 1" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as done:
+        cli.main(["bench", "nope"])
+    assert done.value.code == 2 and "invalid choice: 'nope'" in capsys.readouterr().err
+
+
+def test_cli_missing_extra_is_one_line(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "cv2", None)  # import cv2 now fails as if OpenCV were not installed
+    assert cli.main(["bench", "accuracy", "--scenes", "1"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and len(err.strip().splitlines()) == 1, err
+    assert err.startswith("tpnet bench accuracy: error:") and common.EXTRA_HINT in err and "opencv" in err
+
+
+def test_python_dash_m_runs_a_bench():
+    done = subprocess.run([sys.executable, "-m", "tpnet_gpu.bench.bench_tp", "--repeat", "0"], capture_output=True,
+                          text=True)
+    assert done.returncode == 2 and "tpnet bench tp: error: --repeat: expected at least 1" in done.stderr
