@@ -4,6 +4,8 @@ Scene: the demo scene, 320x240 (40x30 tiles), photon and read noise on, seed 7 (
 those are 10000+), rendered once for the module. Oracles: the renderer's per-tile ground truth
 (``Rendered.tile_disparity``) for accuracy; TPNET run by hand from the public pieces (a tile processor with the
 weights' correlation settings, ``infer.infer``) for "the pipeline returns what the network says".
+The fixture takes ~2.6 s in the full suite on 2 idle cores (~5 s run alone: it then also pays the Warp and
+Taichi start-up), the tests < 1 s each: not marked slow.
 """
 
 import numpy as np
@@ -19,10 +21,6 @@ from tpnet_gpu.pipeline import Pipeline, load_frames
 from tpnet_gpu.processor import TileProcessor
 from tpnet_gpu.scenes import Sensor, demo_scene, render
 from tpnet_gpu.scenes.folder import save
-
-# The module's fixture (demo scene textures, render, pipeline build and first frame) takes ~5 s on an idle
-# 2-core machine (5-11 s measured on a busy one); it is charged to whichever test runs first, so all are slow.
-pytestmark = pytest.mark.slow
 
 WIDTH, HEIGHT, SEED = 320, 240, 7
 # RMSE(network) / RMSE(initial targets) on the flat tiles where the initial target is within 1 px of the ground
