@@ -162,3 +162,43 @@ class TrainConfig:
         if len(self.variant_weights) != len(self.variants):
             raise ValueError(f"variant_weights: expected one weight per variant {self.variants}, "
                              f"got {self.variant_weights}")
+
+
+@dataclass(frozen=True)
+class EngineConfig:
+    """The disparity engine (tpnet_gpu/disparity): a coarse-to-fine cost-volume search, then sparse refinement.
+
+    Disparities in px of the full frame. ``d_min``/``d_max``: the range searched (None for d_max: from the rig and
+    ``nearest_m``). Coarse stage: frames binned 2x2 (mono), targets every ``coarse_step`` coarse px, each pass's
+    correlations used within +-``reach`` px of its target. Full resolution: one pass at the coarse answer, read
+    within +-``reach``. Aggregation (SGM over the tile grid) penalties ``p1`` (one-bin step), ``p2`` (any jump),
+    on costs 1 - correlation, bins of ``bin_step`` px. Refinement: LMA (quad) or the pairs' combined peak
+    (any rig) re-correlation, at most ``refine_passes`` passes over the tiles that still move more than
+    ``tolerance`` px; a measurement counts where its strength >= ``min_strength`` and |residual| <= ``trust``."""
+
+    d_min: float = 0.0
+    d_max: float | None = None
+    nearest_m: float = 8.0
+    coarse_step: float = 10.0
+    reach: float = 6.0
+    bin_step: float = 0.5
+    p1: float = 0.05
+    p2: float = 0.3
+    refine_passes: int = 4
+    tolerance: float = 0.03
+    min_strength: float = 0.1
+    trust: float = 4.0
+
+    def __post_init__(self):
+        for name in ("coarse_step", "reach", "bin_step", "nearest_m", "tolerance", "trust"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
+                raise ValueError(f"EngineConfig.{name}: expected a finite number > 0, got {value!r}")
+        for name in ("p1", "p2", "min_strength"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0):
+                raise ValueError(f"EngineConfig.{name}: expected a finite number >= 0, got {value!r}")
+        if self.d_max is not None and not (np.isfinite(self.d_max) and self.d_max > self.d_min):
+            raise ValueError(f"EngineConfig.d_max: expected a finite number > d_min={self.d_min}, got {self.d_max!r}")
+        if not isinstance(self.refine_passes, int) or self.refine_passes < 0:
+            raise ValueError(f"EngineConfig.refine_passes: expected an int >= 0, got {self.refine_passes!r}")

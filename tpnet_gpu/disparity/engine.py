@@ -1,0 +1,173 @@
+"""The disparity engine: one first stage and one refinement for any rig (geometry_and_lma.md C.1, C.6).
+
+Per frame: (1) coarse search - the frames binned 2x2 (mono) and correlated at a few targets, every pass's lags
+read along each pair's axis into a cost volume (``volume.CostVolume``), aggregated over the tile grid by SGM;
+(2) one full-resolution pass at the coarse answer, read the same way within +-``reach`` px and aggregated again;
+(3) refinement - re-correlation at target + residual (secant step on a sign flip) on the tiles that still move
+(the processor's ``active`` mask, so a pass costs only those tiles). ``tile_passes`` counts tiles x cameras
+processed per frame in units of one full-resolution pass (a binned pass counts 1/4).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from tpnet_gpu import tables
+from tpnet_gpu.camera import Rig
+from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig
+from tpnet_gpu.disparity.measure import Measurer
+from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs
+from tpnet_gpu.disparity.volume import CostVolume, aggregate, pick
+from tpnet_gpu.processor import TileProcessor
+
+BIN = 2  # coarse stage: 2x2 binning
+OFFSETS_STEP = 0.5  # px between the lags read along a pair's axis
+
+
+@dataclass(frozen=True)
+class DisparityResult:
+    """One frame's disparities, torch on the engine's device, ``(tiles_y, tiles_x)`` each.
+
+    Attributes:
+        disparity: px, NaN where no measurement was trusted.
+        strength: the final measurement's correlation strength (0 where none): the per-tile confidence.
+        search: the first stage's answer (before refinement), px.
+        margin: the first stage's aggregated-cost margin to the best choice > 1 px away (larger = surer).
+        tile_passes: tiles x cameras processed, in full-resolution passes.
+    """
+
+    disparity: torch.Tensor
+    strength: torch.Tensor
+    search: torch.Tensor
+    margin: torch.Tensor
+    tile_passes: float
+
+
+def correlation_for(cfa: str | None) -> CorrelationConfig:
+    """The engine's correlation settings: the baseline's green-only phase correlation, or mono."""
+    return BASELINE_CORRELATION if cfa is not None else CorrelationConfig(fat_zero=BASELINE_CORRELATION.fat_zero)
+
+
+class DisparityEngine:
+    """Disparity of frames ``(cams, height, width)`` from any rig (see the module docstring).
+
+    Args:
+        rig: the rig (camera offsets; a calibrated rig's tile centres are used at full resolution). Default:
+            the ideal quad of this frame size.
+        pairs: camera pairs to correlate (default: every pair of the rig, the quad's 6 in the spec's order).
+        cfa: Bayer pattern or None (mono).
+        config: search and refinement settings.
+    """
+
+    def __init__(self, height: int, width: int, *, rig: Rig | None = None, pairs=None, cfa: str | None = "GRBG",
+                 config: EngineConfig = EngineConfig(), device: str | None = None, backend: str | None = None):
+        self.rig = rig if rig is not None else Rig(width=width, height=height)
+        if (self.rig.width, self.rig.height) != (width, height):
+            raise ValueError(f"rig: expected a {width}x{height} sensor, got {self.rig.width}x{self.rig.height}")
+        offsets = self.rig.offsets_array()
+        if pairs is None:
+            pairs = tables.QUAD_PAIRS if offsets.shape == (4, 2) and np.allclose(offsets, tables.QUAD_OFFSETS) else \
+                tuple((a, b) for a in range(len(offsets)) for b in range(a + 1, len(offsets)))
+        self.config = config
+        self.d_max = config.d_max if config.d_max is not None else float(self.rig.disparity(config.nearest_m))
+        self.tp = TileProcessor(height, width, camera_offsets=offsets, pairs=pairs, cfa=cfa,
+                                config=correlation_for(cfa), device=device, backend=backend)
+        self.device = self.tp.torch_device
+        self.grid = (self.tp.tiles_y, self.tp.tiles_x)
+        self.sampler = AxisSampler(offsets, pairs, self.device)
+        self.offsets = torch.arange(-7.0, 7.0 + 1e-6, OFFSETS_STEP, device=self.device)
+        self.measurer = Measurer(self.tp.pairs, self.sampler, config)
+        self.calibrated = not self.rig.is_ideal()
+        coarse_ok = height % (8 * BIN) == 0 and width % (8 * BIN) == 0 and min(height, width) >= 16 * BIN
+        self.coarse = None
+        if coarse_ok:
+            self.coarse = TileProcessor(height // BIN, width // BIN, camera_offsets=offsets, pairs=pairs, cfa=None,
+                                        config=CorrelationConfig(fat_zero=BASELINE_CORRELATION.fat_zero,
+                                                                 sigma_corr=tables.CORR_SIGMA),
+                                        device=str(self.tp.device), backend=self.tp.backend)
+
+    # --- first stage ---------------------------------------------------------------------------------------
+    def _sweep(self, tp: TileProcessor, targets, volume: CostVolume, grid) -> None:
+        """Measure the loaded frame at each target (uniform numbers or ``(ty, tx)`` tensors) into ``volume``."""
+        for target in targets:
+            t = target if isinstance(target, torch.Tensor) else torch.full(grid, float(target), device=self.device)
+            corr = self._measure(tp, t).corr
+            combined = combine_pairs(self.sampler.sample(corr, self.offsets))
+            volume.add(t, self.offsets, combined, self.config.reach)
+
+    def _measure(self, tp: TileProcessor, target: torch.Tensor, active=None):
+        if tp is self.tp and self.calibrated:
+            centres = self.rig.tile_centres(target.detach().cpu().numpy().astype(np.float64)).astype(np.float32)
+            return tp.measure(centres=centres, active=active)
+        return tp.measure(target, active=active)
+
+    def _choose(self, volume: CostVolume) -> tuple[torch.Tensor, torch.Tensor]:
+        cost = 1.0 - torch.nan_to_num(volume.values, nan=0.0).clamp(-1.0, 1.0)
+        return pick(aggregate(cost, self.config.p1, self.config.p2), volume.disparities, volume.step)
+
+    def search(self, frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, float]:
+        """First stage on frames already loaded into the full-resolution processor: ``(search, margin, passes)``."""
+        cfg, passes = self.config, 0.0
+        margin_lo = cfg.d_min - cfg.reach
+        if self.coarse is not None:
+            binned = F.avg_pool2d(frames.to(self.device, torch.float32)[:, None], BIN)[:, 0]
+            self.coarse.load(binned)
+            grid = (self.coarse.tiles_y, self.coarse.tiles_x)
+            lo, hi = cfg.d_min / BIN, self.d_max / BIN
+            targets = np.arange(lo + cfg.reach - 2.0, hi + cfg.reach, cfg.coarse_step)
+            volume = CostVolume(grid, lo - 1.0, hi + 1.0, cfg.bin_step, self.device)
+            self._sweep(self.coarse, targets, volume, grid)
+            passes += len(targets) / BIN**2
+            coarse, _ = self._choose(volume)
+            start = BIN * F.interpolate(coarse[None, None], size=self.grid, mode="nearest")[0, 0]
+            starts = [start]
+        else:
+            starts = list(np.arange(cfg.d_min + cfg.reach - 2.0, self.d_max + cfg.reach, 2 * cfg.reach - 2.0))
+        volume = CostVolume(self.grid, margin_lo, self.d_max + cfg.reach, cfg.bin_step, self.device)
+        self._sweep(self.tp, starts, volume, self.grid)
+        passes += len(starts)
+        found, margin = self._choose(volume)
+        return found, margin, passes
+
+    # --- refinement ------------------------------------------------------------------------------------------
+    def refine(self, start: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, float]:
+        """Re-correlation from ``start`` on the tiles that still move: ``(disparity, strength, passes)``."""
+        cfg = self.config
+        t = start.clone()
+        active = torch.isfinite(t)
+        disparity = torch.full_like(t, float("nan"))
+        strength = torch.zeros_like(t)
+        prev_t = torch.full_like(t, float("nan"))
+        prev_d = torch.full_like(t, float("nan"))
+        passes = 0.0
+        tiles = t.numel()
+        for _ in range(cfg.refine_passes):
+            if not bool(active.any()):
+                break
+            corr = self._measure(self.tp, torch.nan_to_num(t, nan=0.0), active=active).corr
+            passes += float(active.sum()) / tiles
+            d, s = self.measurer.measure(corr, active.reshape(-1))
+            d, s = d.reshape(t.shape), s.reshape(t.shape)
+            good = active & torch.isfinite(d) & (s >= cfg.min_strength) & (d.abs() <= cfg.trust)
+            disparity = torch.where(good, t + d, disparity)
+            strength = torch.where(good, s, strength)
+            flipped = good & torch.isfinite(prev_d) & (torch.sign(d) != torch.sign(prev_d)) & (prev_d != d)
+            secant = (t * prev_d - prev_t * d) / torch.where(flipped, prev_d - d, torch.ones_like(d))
+            nxt = torch.where(flipped, secant, t + d)
+            done = ~good | (d.abs() < cfg.tolerance) | ((nxt - t).abs() < cfg.tolerance)
+            prev_t, prev_d = torch.where(good, t, prev_t), torch.where(good, d, prev_d)
+            t = torch.where(good & ~done, nxt, t)
+            active = active & good & ~done
+        return disparity, strength, passes
+
+    def run(self, frames) -> DisparityResult:
+        """The whole engine on one frame ``(cams, H, W)`` (torch on any device or NumPy, any real dtype)."""
+        frames_t = frames if isinstance(frames, torch.Tensor) else torch.from_numpy(np.asarray(frames))
+        self.tp.load(frames_t)
+        found, margin, passes = self.search(frames_t)
+        disparity, strength, refine_passes = self.refine(found)
+        return DisparityResult(disparity, strength, found, margin, passes + refine_passes)

@@ -1,0 +1,62 @@
+"""Per-tile measurement of the residual disparity from pair correlations: one ``Measurer`` for any rig.
+
+For the quad's 6 pairs it is the baseline's measurement (strips -> centre of mass -> LMA peak fit,
+geometry_and_lma.md C.1-C.4); for any other pair list, the peak of the pairs' combined correlation read along
+their axes (``pairs.AxisSampler``) at quarter-pixel offsets, refined by a parabola.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from tpnet_gpu import tables
+from tpnet_gpu.baseline.estimate import BaselineParams, measure as lma_measure
+from tpnet_gpu.config import EngineConfig
+from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs
+
+PEAK_OFFSETS = 0.25  # px between the offsets the generic peak is read at
+
+
+class Measurer:
+    """``measure(corr (T, P, 15, 15), active (T,)) -> (residual (T,), strength (T,))``, NaN / 0 where none."""
+
+    def __init__(self, pairs, sampler: AxisSampler, config: EngineConfig):
+        self.lma = tuple(pairs) == tables.QUAD_PAIRS
+        self.sampler = sampler
+        self.params = BaselineParams(min_strength=config.min_strength, trust=config.trust, tolerance=config.tolerance)
+        reach = min(sampler.reach, config.trust + 1.0)
+        self.offsets = torch.arange(-reach, reach + 1e-6, PEAK_OFFSETS, device=sampler.vectors.device)
+
+    def measure(self, corr: torch.Tensor, active: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        tiles = corr.shape[0]
+        residual = torch.full((tiles,), float("nan"), device=corr.device)
+        strength = torch.zeros((tiles,), device=corr.device)
+        index = torch.nonzero(active, as_tuple=True)[0]
+        if index.numel() == 0:
+            return residual, strength
+        sub = corr[index]
+        if self.lma:  # the LMA runs in float64 NumPy (a host round trip of the active tiles)
+            m = lma_measure(sub.detach().cpu().numpy(), self.params)
+            residual[index] = torch.as_tensor(m.residual, dtype=torch.float32, device=corr.device)
+            strength[index] = torch.as_tensor(m.strength, dtype=torch.float32, device=corr.device)
+            return residual, strength
+        d, s = self._peak(sub)
+        residual[index], strength[index] = d, s
+        return residual, strength
+
+    def _peak(self, corr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        combined = torch.nan_to_num(combine_pairs(self.sampler.sample(corr, self.offsets)), nan=-1.0)
+        j = torch.argmax(combined, dim=1, keepdim=True)
+        n = combined.shape[1]
+        c0 = torch.gather(combined, 1, j)
+        cm = torch.gather(combined, 1, (j - 1).clamp(min=0))
+        cp = torch.gather(combined, 1, (j + 1).clamp(max=n - 1))
+        denom = cm - 2 * c0 + cp
+        inner = (j > 0) & (j < n - 1) & (denom < 0)
+        frac = torch.where(inner, 0.5 * (cm - cp) / torch.where(inner, denom, torch.ones_like(denom)),
+                           torch.zeros_like(denom))
+        e = self.offsets[j[:, 0]] + PEAK_OFFSETS * frac[:, 0].clamp(-0.5, 0.5)
+        strength = c0[:, 0]
+        return torch.where(inner[:, 0], e, torch.full_like(e, float("nan"))), torch.where(inner[:, 0], strength,
+                                                                                          torch.zeros_like(strength))

@@ -1,0 +1,75 @@
+"""Pair geometry of any rig, and the correlation sampled along each pair's disparity axis (geometry_and_lma.md B.2,
+B.3; tile_processor.md §6.4).
+
+Convention: camera i sees a centre-camera point c at c - d r_i (r_i its offset in baselines), so pair (a, b)'s
+correlation of a tile measured at target T with true disparity T + e peaks at lag ``-e v`` with
+``v = r_b - r_a`` (x, y; lag units = pixels). Directions and lengths come from the offsets, never from quad tables.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from tpnet_gpu import tables
+from tpnet_gpu.layout import CORR_RADIUS, TILE_SIZE
+
+
+def pair_vectors(offsets, pairs) -> np.ndarray:
+    """``(pairs, 2)`` lag per unit residual disparity (x, y): r_second - r_first."""
+    r = np.asarray(offsets, dtype=np.float64)
+    return np.array([r[b] - r[a] for a, b in pairs])
+
+
+def window_overlap(shift) -> np.ndarray:
+    """Relative correlation amplitude of two 16-px half-sine windows shifted by ``shift`` px (any shape):
+    sum_n w(n) w(n + k) / sum_n w(n)^2, linearly interpolated, 0 beyond the window."""
+    w = tables.half_sine(np.arange(TILE_SIZE))
+    k = np.arange(TILE_SIZE)
+    table = np.array([np.dot(w[: TILE_SIZE - j], w[j:]) for j in k]) / np.dot(w, w)
+    return np.interp(np.abs(np.asarray(shift, dtype=np.float64)), k, table, right=0.0)
+
+
+class AxisSampler:
+    """Samples pair correlations ``(T, P, 15, 15)`` at disparity offsets ``e`` along each pair's axis (bilinear),
+    divided by the windows' overlap at that lag (the peak of a true shift loses amplitude as the windows overlap
+    less - without this, off-centre lags lose to weaker centred ones). NaN where a lag falls outside +-7."""
+
+    def __init__(self, offsets, pairs, device):
+        v = pair_vectors(offsets, pairs)
+        self.vectors = torch.as_tensor(v, dtype=torch.float32, device=device)  # (P, 2)
+        self.reach = float(CORR_RADIUS / np.abs(v).max())  # |e| the lags of every pair reach
+        k = np.linspace(0.0, TILE_SIZE, 4 * TILE_SIZE + 1)
+        self._ov_k = torch.as_tensor(k, dtype=torch.float32, device=device)
+        self._ov = torch.as_tensor(window_overlap(k), dtype=torch.float32, device=device)
+
+    def _overlap(self, shift: torch.Tensor) -> torch.Tensor:
+        pos = (shift.abs() / TILE_SIZE * (len(self._ov) - 1)).clamp(max=len(self._ov) - 1)
+        lo = pos.floor().long().clamp(max=len(self._ov) - 2)
+        frac = pos - lo
+        return self._ov[lo] * (1 - frac) + self._ov[lo + 1] * frac
+
+    def sample(self, corr: torch.Tensor, e: torch.Tensor) -> torch.Tensor:
+        """``(T, P, E)`` overlap-normalised pair correlations at offsets ``e`` ``(T, E)`` or ``(E,)`` (px)."""
+        tiles, npairs = corr.shape[:2]
+        e = e.expand(tiles, -1) if e.dim() == 1 else e
+        lag = -e[:, None, :, None] * self.vectors[None, :, None, :]  # (T, P, E, 2) x, y
+        grid = (lag / CORR_RADIUS).reshape(tiles * npairs, 1, -1, 2)
+        values = F.grid_sample(corr.reshape(tiles * npairs, 1, 2 * CORR_RADIUS + 1, 2 * CORR_RADIUS + 1).float(),
+                               grid, mode="bilinear", padding_mode="zeros", align_corners=True)
+        values = values.reshape(tiles, npairs, -1)
+        overlap = self._overlap(lag[..., 0]) * self._overlap(lag[..., 1])
+        inside = (lag.abs() <= CORR_RADIUS + 1e-4).all(dim=-1)
+        return torch.where(inside, values / overlap.clamp(min=0.05), torch.full_like(values, float("nan")))
+
+
+def combine_pairs(values: torch.Tensor, offset: float = 0.1) -> torch.Tensor:
+    """``(T, E)``: geometric mean over pairs of max(value + offset, 0), minus ``offset`` (the pairs must agree:
+    a false peak of one direction is suppressed by the others); NaN pairs are left out, all-NaN gives NaN."""
+    finite = torch.isfinite(values)
+    logs = torch.log(torch.clamp(torch.where(finite, values, torch.zeros_like(values)) + offset, min=1e-6))
+    count = finite.sum(dim=1)
+    mean = torch.where(finite, logs, torch.zeros_like(logs)).sum(dim=1) / count.clamp(min=1)
+    out = torch.exp(mean) - offset
+    return torch.where(count > 0, out, torch.full_like(out, float("nan")))
