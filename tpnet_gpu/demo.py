@@ -68,7 +68,7 @@ def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int =
     initial = result.initial.cpu().numpy().astype(np.float64)
     classes = evaluation.tile_classes(gt, rendered.tile_confidence, rendered.tile_spread)
     stats = {name: {c: evaluation.error_stats(est, gt, mask) for c, mask in classes.items()}
-             for name, est in (("tpnet", net), ("centre-of-mass initial targets", initial))}
+             for name, est in (("tpnet", net), ("disparity engine (network input)", initial))}
     high = float(np.nanpercentile(gt, 99))
     save_png(out / "disparity.png", _upscale(colour_ramp(net, 0.0, high)))
     save_png(out / "ground_truth.png", _upscale(colour_ramp(gt, 0.0, high)))
@@ -89,7 +89,7 @@ def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int =
     }
     lines = [f"tpnet demo: {width}x{height} quad frame of the built-in scene on {pipeline.device}",
              f"render {t_render:.1f} s, pipeline set-up {t_setup:.1f} s, one frame {t_frame:.2f} s "
-             f"(sweep {len(pipeline.config.sweep)} + {pipeline.config.refine_passes} re-correlations + network + texture)"]
+             f"(disparity engine: {result.tile_passes:.1f} tile passes; network + texture)"]
     for name, per_class in stats.items():
         parts = [f"{c} rmse {v['rmse_inliers']:.3f} px (median {v['median_abs']:.3f}, gross {v['gross']:.1%}, "
                  f"{v['tiles']} tiles)" for c, v in per_class.items() if c in ("flat", "edge")]

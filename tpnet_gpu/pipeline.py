@@ -1,39 +1,33 @@
-"""The frame pipeline: raw quad frames in, disparity (+ confidence) and an RGBA texture out, on one device.
+"""The frame pipeline: raw frames of any rig in, disparity (+ confidence) and an RGBA texture out, on one device.
 
-Per frame, everything stays on the pipeline's device (no host round trip): a coarse sweep of target
-disparities measured by the tile processor and the on-device centre-of-mass estimator (strips,
-geometry_and_lma.md C.1-C.3) gives initial targets; a few re-correlation passes refine them; TPNET reads the
-tile processor's layers at those targets (zero-copy) and predicts the disparity; the texture is made at the
-predicted disparity.
-Buffers belong to the two tile processors and the model and are allocated once per frame size; results are
-views of them, overwritten by the next frame.
+Per frame: the disparity engine (``tpnet_gpu.disparity``: coarse-to-fine cost-volume search, SGM over the tile
+grid, sparse re-correlation) gives each tile's disparity; for the quad, TPNET then reads the tile processor's
+layers at those disparities (zero-copy) and predicts the final disparity; the texture is made at that disparity.
+Frames are loaded once per frame. Buffers belong to the tile processors and the model and are allocated once per
+frame size; results are views or new small tensors, valid until the next frame.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
 
-from tpnet_gpu.baseline.estimate import BASELINE_CORRELATION
-from tpnet_gpu.baseline.strips import StripParams, centre_of_mass, combine_strips, pair_strips
-from tpnet_gpu.config import TextureConfig
+from tpnet_gpu import tables
+from tpnet_gpu.camera import Rig
+from tpnet_gpu.config import EngineConfig, TextureConfig
+from tpnet_gpu.disparity.engine import DisparityEngine
 from tpnet_gpu.processor import TileProcessor
 
 
 @dataclass(frozen=True)
 class PipelineConfig:
-    """``sweep``: initial target disparities tried (px); ``refine_passes`` of centre-of-mass re-correlation;
-    ``trust``: largest residual believed (px); ``min_strength``: weakest peak taken as a measurement (as the
-    baseline's refine_min_strength); ``network_passes``: TPNET passes, each re-correlating at the previous
-    one's disparity; ``textures``: make the RGBA texture."""
+    """``engine``: the disparity engine's settings; ``network_passes``: TPNET passes (quad only), each
+    re-correlating at the previous one's disparity; ``textures``: make the RGBA texture."""
 
-    sweep: tuple = (0.0, 6.0, 12.0, 18.0, 24.0, 30.0, 36.0, 42.0)
-    refine_passes: int = 2
-    trust: float = 4.0
-    min_strength: float = 0.1
+    engine: EngineConfig = EngineConfig()
     network_passes: int = 1
     textures: bool = True
 
@@ -44,14 +38,18 @@ class PipelineConfig:
 
 @dataclass(frozen=True)
 class FrameResult:
-    """One frame's results, torch tensors on the pipeline's device (views, overwritten by the next frame).
+    """One frame's results, torch tensors on the pipeline's device (valid until the next frame).
 
     Attributes:
-        disparity: ``(tiles_y, tiles_x)`` TPNET disparity, px (NaN where no tile measurement was possible).
-        confidence: ``(tiles_y, tiles_x)`` strength of the correlation peak at the refined target, 0 = none.
-        initial: ``(tiles_y, tiles_x)`` the refined targets the network read its layers at (NaN = none).
+        disparity: ``(tiles_y, tiles_x)`` final disparity, px (TPNET's for the quad, else the engine's); NaN
+            where the engine trusted no measurement.
+        confidence: ``(tiles_y, tiles_x)`` strength of the engine's final correlation peak, 0 = none.
+        initial: ``(tiles_y, tiles_x)`` the engine's disparities the network read its layers at (NaN = none).
+        search: ``(tiles_y, tiles_x)`` the engine's first-stage answer (finite everywhere): where ``initial`` is
+            NaN the network and the texture read the tile there.
         valid: ``(tiles_y, tiles_x)`` bool: the tile's windows were inside the image and finite.
-        texture: ``(4, H, W)`` R, G, B, alpha at the network's disparity, or None.
+        texture: ``(channels, H, W)`` R, G, B (or Y), alpha at the final disparity, or None.
+        tile_passes: tiles x cameras processed for the disparity, in full-resolution passes.
     """
 
     disparity: torch.Tensor
@@ -59,78 +57,77 @@ class FrameResult:
     initial: torch.Tensor
     valid: torch.Tensor
     texture: torch.Tensor | None
+    search: torch.Tensor
+    tile_passes: float
 
 
 class Pipeline:
-    """Frames of ``height`` x ``width`` from a quad with the ideal geometry (``cfa`` Bayer mosaics).
+    """Frames of ``height`` x ``width`` from a rig (default: the ideal quad).
 
     Args:
-        weights: TPNET weights (default: the shipped ones).
+        cfa: Bayer pattern of the frames, or None for mono.
+        rig: camera geometry (any number of cameras; a calibrated rig's tile centres are used).
+        pairs: camera pairs to correlate (default: all pairs of the rig; the quad's 6).
+        min_disparity, max_disparity: the range searched, px (default: 0 to the rig's disparity at
+            ``EngineConfig.nearest_m``).
+        weights: TPNET weights (default: the shipped ones; quad only).
         device: "cpu" or "cuda" (default cuda when present).
-        backend: kernel language of the tile processors, "warp" or "taichi"; None: ``TileProcessor``'s default
-            (Taichi on the CPU, Warp on CUDA).
+        backend: kernel language of the tile processors, "warp" or "taichi"; None: ``TileProcessor``'s default.
     """
 
-    def __init__(self, height: int, width: int, *, cfa: str = "GRBG", weights=None, device: str | None = None,
-                 config: PipelineConfig = PipelineConfig(), backend: str | None = None):
-        from tpnet_gpu.net import infer  # noqa: PLC0415 - torch model loading on use
+    def __init__(self, height: int, width: int, *, cfa: str | None = "GRBG", rig: Rig | None = None, pairs=None,
+                 min_disparity: float | None = None, max_disparity: float | None = None, weights=None,
+                 device: str | None = None, config: PipelineConfig = PipelineConfig(), backend: str | None = None):
+        engine_config = config.engine
+        if min_disparity is not None:
+            engine_config = replace(engine_config, d_min=float(min_disparity))
+        if max_disparity is not None:
+            engine_config = replace(engine_config, d_max=float(max_disparity))
+        self.config = replace(config, engine=engine_config)
+        self.engine = DisparityEngine(height, width, rig=rig, pairs=pairs, cfa=cfa, config=engine_config,
+                                      device=device, backend=backend, textures=config.textures)
+        tp = self.engine.tp
+        self.device = tp.torch_device
+        self.grid = self.engine.grid
+        self.model = None
+        self.network_tp = None
+        if tp.pairs == tables.QUAD_PAIRS:
+            from tpnet_gpu.net import infer  # noqa: PLC0415 - torch model loading on use
 
-        self.config = config
-        self.measure = TileProcessor(height, width, cfa=cfa, config=BASELINE_CORRELATION, device=device,
-                                     backend=backend)
-        self.network_tp = TileProcessor(height, width, cfa=cfa, config=infer.correlation(weights),
-                                        textures=config.textures, texture_config=TextureConfig(),
-                                        device=str(self.measure.device), backend=backend)
-        self.device = self.measure.torch_device
-        self.grid = (self.measure.tiles_y, self.measure.tiles_x)
-        self.model = infer.load(weights, device=self.device)
-        self._infer = infer.infer
-        self._strip_params = StripParams()
-        shape = self.grid
-        self._target = torch.zeros(shape, device=self.device)
-        self._best_strength = torch.zeros(shape, device=self.device)
-        self._best_target = torch.zeros(shape, device=self.device)
-
-    def _residual(self, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Centre-of-mass residual and strength ``(ty, tx)`` of the loaded frame at ``target``, on the device."""
-        corr = self.measure.measure(target).corr
-        com = centre_of_mass(combine_strips(pair_strips(corr), self._strip_params.corr_offset), self._strip_params)
-        return com.disparity.reshape(self.grid).to(torch.float32), com.strength.reshape(self.grid).to(torch.float32)
+            net_config = infer.correlation(weights)
+            same = net_config.resolved(tp.colours) == tp.config
+            self.network_tp = tp if same else TileProcessor(
+                height, width, cfa=cfa, config=net_config, textures=config.textures, texture_config=TextureConfig(),
+                device=str(tp.device), backend=backend)
+            self.model = infer.load(weights, device=self.device)
+            self._infer = infer.infer
 
     def process(self, frames) -> FrameResult:
-        """Frames ``(4, H, W)`` (torch on any device or NumPy, any real dtype; black level subtracted)."""
+        """Frames ``(cams, H, W)`` (torch on any device or NumPy, any real dtype; black level subtracted)."""
         cfg = self.config
-        best_t, best_s, target = self._best_target, self._best_strength, self._target
-        best_t.fill_(float("nan"))
-        best_s.zero_()
-        self.measure.load(frames)  # once per frame; every pass below measures it at new targets
-        for value in cfg.sweep:
-            target.fill_(value)
-            residual, strength = self._residual(target)
-            better = (torch.isfinite(residual) & (residual.abs() <= cfg.trust) & (strength >= cfg.min_strength)
-                      & (strength > best_s))
-            best_t.copy_(torch.where(better, target + residual, best_t))
-            best_s.copy_(torch.where(better, strength, best_s))
-        target.copy_(torch.nan_to_num(best_t, nan=0.0))
-        measured = torch.isfinite(best_t)
-        strength = best_s
-        for _ in range(cfg.refine_passes):
-            residual, strength = self._residual(target)
-            step = torch.isfinite(residual) & (residual.abs() <= cfg.trust) & measured
-            target.copy_(torch.where(step, target + residual, target))
-        initial = torch.where(measured, target, torch.full_like(target, float("nan")))
-        tp = self.network_tp
-        disparity = target
-        tp.load(frames)
-        for _ in range(cfg.network_passes):
-            disparity = self._infer(self.model, tp.measure(disparity).layers, disparity, grid=self.grid)
-        disparity = torch.where(measured, disparity, torch.full_like(disparity, float("nan")))
-        if cfg.textures:  # shift-corrected at the network's disparity
-            tp.set_targets(torch.nan_to_num(disparity, nan=0.0))
+        result = self.engine.run(frames)
+        measured = torch.isfinite(result.disparity)
+        initial = result.disparity
+        disparity = initial
+        tp = self.engine.tp
+        if self.model is not None:
+            tp = self.network_tp
+            if tp is not self.engine.tp:
+                tp.load(frames)
+            # tiles the refinement left unmeasured are read at the first stage's answer (always finite)
+            target = torch.where(measured, initial, result.search)
+            for _ in range(cfg.network_passes):
+                target = self._infer(self.model, self.engine.measure_at(tp, target).layers, target, grid=self.grid)
+            disparity = torch.where(measured, target, torch.full_like(target, float("nan")))
+        texture = None
+        if cfg.textures:  # shift-corrected at the final disparity
+            self.engine.set_targets(tp, torch.where(measured, disparity, result.search))
             tp.convert()
             tp.texture()
-        confidence = torch.where(measured, strength, torch.zeros_like(strength))
-        return FrameResult(disparity, confidence, initial, tp.result.valid.view(self.grid), tp.result.texture)
+            texture = tp.result.texture
+        confidence = torch.where(measured, result.strength, torch.zeros_like(result.strength))
+        return FrameResult(disparity, confidence, initial, tp.result.valid.view(self.grid), texture, result.search,
+                           result.tile_passes)
 
     def stream(self, frames: Iterable) -> Iterator[FrameResult]:
         """Process an iterable of frames (e.g. a camera) one by one; each result is valid until the next."""

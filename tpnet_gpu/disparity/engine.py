@@ -61,10 +61,12 @@ class DisparityEngine:
         pairs: camera pairs to correlate (default: every pair of the rig, the quad's 6 in the spec's order).
         cfa: Bayer pattern or None (mono).
         config: search and refinement settings.
+        textures: build the full-resolution processor with textures (the pipeline shares it for the texture).
     """
 
     def __init__(self, height: int, width: int, *, rig: Rig | None = None, pairs=None, cfa: str | None = "GRBG",
-                 config: EngineConfig = EngineConfig(), device: str | None = None, backend: str | None = None):
+                 config: EngineConfig = EngineConfig(), device: str | None = None, backend: str | None = None,
+                 textures: bool = False):
         self.rig = rig if rig is not None else Rig(width=width, height=height)
         if (self.rig.width, self.rig.height) != (width, height):
             raise ValueError(f"rig: expected a {width}x{height} sensor, got {self.rig.width}x{self.rig.height}")
@@ -75,7 +77,7 @@ class DisparityEngine:
         self.config = config
         self.d_max = config.d_max if config.d_max is not None else float(self.rig.disparity(config.nearest_m))
         self.tp = TileProcessor(height, width, camera_offsets=offsets, pairs=pairs, cfa=cfa,
-                                config=correlation_for(cfa), device=device, backend=backend)
+                                config=correlation_for(cfa), textures=textures, device=device, backend=backend)
         self.device = self.tp.torch_device
         self.grid = (self.tp.tiles_y, self.tp.tiles_x)
         self.sampler = AxisSampler(offsets, pairs, self.device)
@@ -95,15 +97,25 @@ class DisparityEngine:
         """Measure the loaded frame at each target (uniform numbers or ``(ty, tx)`` tensors) into ``volume``."""
         for target in targets:
             t = target if isinstance(target, torch.Tensor) else torch.full(grid, float(target), device=self.device)
-            corr = self._measure(tp, t).corr
+            corr = self.measure_at(tp, t).corr
             combined = combine_pairs(self.sampler.sample(corr, self.offsets))
             volume.add(t, self.offsets, combined, self.config.reach)
 
-    def _measure(self, tp: TileProcessor, target: torch.Tensor, active=None):
-        if tp is self.tp and self.calibrated:
+    def set_targets(self, tp: TileProcessor, target: torch.Tensor, active=None) -> None:
+        """Targets ``(ty, tx)`` into ``tp``: a calibrated rig's tile centres at full resolution (the rig's model
+        is NumPy: a host round trip), the ideal geometry's disparities otherwise (and at the binned level)."""
+        if tp.height == self.rig.height and self.calibrated:
             centres = self.rig.tile_centres(target.detach().cpu().numpy().astype(np.float64)).astype(np.float32)
-            return tp.measure(centres=centres, active=active)
-        return tp.measure(target, active=active)
+            tp.set_targets(centres=centres, active=active)
+        else:
+            tp.set_targets(target, active=active)
+
+    def measure_at(self, tp: TileProcessor, target: torch.Tensor, active=None):
+        """Convert and correlate ``tp``'s loaded frame at ``target``; returns its ``TileResult``."""
+        self.set_targets(tp, target, active)
+        tp.convert()
+        tp.correlate()
+        return tp.result
 
     def _choose(self, volume: CostVolume) -> tuple[torch.Tensor, torch.Tensor]:
         cost = 1.0 - torch.nan_to_num(volume.values, nan=0.0).clamp(-1.0, 1.0)
@@ -148,7 +160,7 @@ class DisparityEngine:
         for _ in range(cfg.refine_passes):
             if not bool(active.any()):
                 break
-            corr = self._measure(self.tp, torch.nan_to_num(t, nan=0.0), active=active).corr
+            corr = self.measure_at(self.tp, torch.nan_to_num(t, nan=0.0), active=active).corr
             passes += float(active.sum()) / tiles
             d, s = self.measurer.measure(corr, active.reshape(-1))
             d, s = d.reshape(t.shape), s.reshape(t.shape)

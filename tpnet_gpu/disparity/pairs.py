@@ -50,14 +50,16 @@ class AxisSampler:
         frac = pos - lo
         return self._ov[lo] * (1 - frac) + self._ov[lo + 1] * frac
 
-    def sample(self, corr: torch.Tensor, e: torch.Tensor) -> torch.Tensor:
-        """``(T, P, E)`` overlap-normalised pair correlations at offsets ``e`` ``(T, E)`` or ``(E,)`` (px)."""
+    def sample(self, corr: torch.Tensor, e: torch.Tensor, mode: str = "bilinear") -> torch.Tensor:
+        """``(T, P, E)`` overlap-normalised pair correlations at offsets ``e`` ``(T, E)`` or ``(E,)`` (px).
+        ``mode`` "bicubic" for sub-pixel peaks (bilinear samples of a sharp peak pull its parabola toward whole
+        lags: +0.19 px median on a rendered plane at 3.3 px, 0.03 bicubic), "bilinear" for cost volumes."""
         tiles, npairs = corr.shape[:2]
         e = e.expand(tiles, -1) if e.dim() == 1 else e
         lag = -e[:, None, :, None] * self.vectors[None, :, None, :]  # (T, P, E, 2) x, y
         grid = (lag / CORR_RADIUS).reshape(tiles * npairs, 1, -1, 2)
         values = F.grid_sample(corr.reshape(tiles * npairs, 1, 2 * CORR_RADIUS + 1, 2 * CORR_RADIUS + 1).float(),
-                               grid, mode="bilinear", padding_mode="zeros", align_corners=True)
+                               grid, mode=mode, padding_mode="zeros", align_corners=True)
         values = values.reshape(tiles, npairs, -1)
         overlap = self._overlap(lag[..., 0]) * self._overlap(lag[..., 1])
         inside = (lag.abs() <= CORR_RADIUS + 1e-4).all(dim=-1)
