@@ -25,6 +25,9 @@ from tpnet_gpu.disparity.volume import CostVolume, aggregate, pick
 from tpnet_gpu.processor import TileProcessor
 
 BIN = 2  # coarse stage: 2x2 binning
+# Frames are scaled to this mean level before correlating, so the fat zero and the strength thresholds (set for
+# 12-bit raw data: rendered scenes have means of 1200-1800) are relative to the signal, for any bit depth.
+REFERENCE_LEVEL = 1500.0
 OFFSETS_STEP = 0.5  # px between the lags read along a pair's axis
 
 
@@ -49,6 +52,8 @@ class DisparityResult:
 
 def correlation_for(cfa: str | None) -> CorrelationConfig:
     """The engine's correlation settings: the baseline's green-only phase correlation, or mono."""
+    # mono keeps its sharp default low-pass: on an 8-bit photograph pair at exact shifts, sigma 0.15 / 0.4 / 0.9
+    # measured 97 / 77 / 67 % of the tiles with the same RMSE on the common ones (0.118 / 0.115 / 0.124 px)
     return BASELINE_CORRELATION if cfa is not None else CorrelationConfig(fat_zero=BASELINE_CORRELATION.fat_zero)
 
 
@@ -122,11 +127,12 @@ class DisparityEngine:
         return pick(aggregate(cost, self.config.p1, self.config.p2), volume.disparities, volume.step)
 
     def search(self, frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, float]:
-        """First stage on frames already loaded into the full-resolution processor: ``(search, margin, passes)``."""
+        """First stage on (normalised) frames already loaded into the full-resolution processor:
+        ``(search, margin, passes)``."""
         cfg, passes = self.config, 0.0
         margin_lo = cfg.d_min - cfg.reach
         if self.coarse is not None:
-            binned = F.avg_pool2d(frames.to(self.device, torch.float32)[:, None], BIN)[:, 0]
+            binned = F.avg_pool2d(frames[:, None], BIN)[:, 0]
             self.coarse.load(binned)
             grid = (self.coarse.tiles_y, self.coarse.tiles_x)
             lo, hi = cfg.d_min / BIN, self.d_max / BIN
@@ -176,9 +182,18 @@ class DisparityEngine:
             active = active & good & ~done
         return disparity, strength, passes
 
+    def normalise(self, frames) -> torch.Tensor:
+        """Frames ``(cams, H, W)`` as float32 on the device, scaled so their mean |value| is ``REFERENCE_LEVEL``
+        (a device scalar: no host round trip); ``self.scale`` keeps the factor (1 for all-zero frames)."""
+        frames_t = frames if isinstance(frames, torch.Tensor) else torch.from_numpy(np.asarray(frames))
+        frames_t = frames_t.to(self.device, torch.float32)
+        level = torch.nan_to_num(frames_t, nan=0.0, posinf=0.0, neginf=0.0).abs().mean()
+        self.scale = torch.where(level > 0, REFERENCE_LEVEL / level, torch.ones_like(level))
+        return frames_t * self.scale
+
     def run(self, frames) -> DisparityResult:
         """The whole engine on one frame ``(cams, H, W)`` (torch on any device or NumPy, any real dtype)."""
-        frames_t = frames if isinstance(frames, torch.Tensor) else torch.from_numpy(np.asarray(frames))
+        frames_t = self.normalise(frames)
         self.tp.load(frames_t)
         found, margin, passes = self.search(frames_t)
         disparity, strength, refine_passes = self.refine(found)
