@@ -7,9 +7,11 @@
 Scenes: the demo scene, then random scenes (seeded), rendered with realistic optics and noise. Ours: the
 tile processor + strips/centre of mass/LMA + sweep and refinement (``tpnet_gpu.baseline.estimate``). Peers:
 OpenCV StereoSGBM, OpenCV phaseCorrelate, scikit-image phase_cross_correlation (bench/peers.py). Per tile class
-(tpnet_gpu/evaluation.py) the RMSE, median |error| and coverage; RMSE vs the 3x3 ground-truth spread (the
-paper's Figure 8) as a PNG. Prints a table, saves JSON. Needs the optional ``bench`` extra (OpenCV, matplotlib):
-``pip install -e ".[bench]"``.
+(tpnet_gpu/evaluation.py) the strict and either-surface gross shares, RMSE on each method's own inliers and on
+the tiles the first baseline gets right, new gross errors, coverage, the baselines' confidence ranking and each
+method's seconds per frame (bench/report.py); RMSE vs the 3x3 ground-truth spread (the paper's Figure 8) as a
+PNG. Prints a table, saves JSON. Needs the optional ``bench`` extra (OpenCV, matplotlib): ``pip install -e
+".[bench]"``.
 """
 
 from __future__ import annotations
@@ -40,7 +42,8 @@ def run_scene(index: int, args, rig: Rig) -> dict:
     log(f"scene {index} ({scene.name}) rendered in {time.perf_counter() - start:.1f} s")
     frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
     shape = rendered.tile_disparity.shape
-    out = {"gt": rendered.tile_disparity, "confidence": rendered.tile_confidence, "spread": rendered.tile_spread}
+    out = {"gt": rendered.tile_disparity, "confidence": rendered.tile_confidence, "spread": rendered.tile_spread,
+           "surfaces": rendered.tile_surfaces, "confidences": {}, "per_frame": {}}
 
     params = BaselineParams()
     configs = {"baseline (G phase correlation)": BASELINE_CORRELATION,
@@ -53,7 +56,10 @@ def run_scene(index: int, args, rig: Rig) -> dict:
         target, _ = initial_targets(correlate, shape, params)
         est = consistency_pass(correlate, refine(correlate, target, params), params)
         estimates[name] = est.disparity
-        log(f"  {name}: {time.perf_counter() - start:.1f} s, passes {np.bincount(est.passes.ravel()).tolist()}")
+        out["confidences"][name] = est.strength
+        seconds = time.perf_counter() - start
+        out["per_frame"][name] = {"seconds": seconds}
+        log(f"  {name}: {seconds:.1f} s, passes {np.bincount(est.passes.ravel()).tolist()}")
         if "initial" not in out:
             out["initial"] = target
 
@@ -65,11 +71,15 @@ def run_scene(index: int, args, rig: Rig) -> dict:
     gt = rendered.tile_disparity
     # camera 0 sees the tile centre c at c + d/2 (x and y); SGBM's map is in camera 0's pixels
     estimates["opencv-StereoSGBM"] = peers.sample(sgbm, 8 * tx + 4 + gt / 2, 8 * ty + 4 + gt / 2)
-    log(f"  SGBM: {time.perf_counter() - start:.1f} s")
+    seconds = time.perf_counter() - start
+    out["per_frame"]["opencv-StereoSGBM"] = {"seconds": seconds}
+    log(f"  SGBM: {seconds:.1f} s")
     for name in peers.METHODS:
         start = time.perf_counter()
         estimates[name] = peers.tile_peer(name, left, right, out["initial"], passes=args.peer_passes)
-        log(f"  {name}: {time.perf_counter() - start:.1f} s")
+        seconds = time.perf_counter() - start
+        out["per_frame"][name] = {"seconds": seconds}
+        log(f"  {name}: {seconds:.1f} s")
     out["estimates"] = estimates
     return out
 

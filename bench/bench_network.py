@@ -71,8 +71,10 @@ def main(argv=None) -> dict:
         frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
         shape = rendered.tile_disparity.shape
         start = time.perf_counter()
-        base = estimate(processor_correlator(base_tp, frames), shape).disparity
+        base_estimate = estimate(processor_correlator(base_tp, frames), shape)
+        base = base_estimate.disparity
         t_base = time.perf_counter() - start
+        costs = {"LMA baseline": {"seconds": t_base}}  # TPNET's seconds include the baseline it starts from
         target = torch.from_numpy(fill_nearest(base).astype(np.float32)).to(net_tp.torch_device)
         estimates = {"LMA baseline": base}
         start = time.perf_counter()
@@ -82,10 +84,12 @@ def main(argv=None) -> dict:
             net = target.cpu().numpy().astype(np.float64)
             net[~np.isfinite(base)] = np.nan  # scored on the tiles the baseline measured
             estimates[pass_name(n)] = net
+            costs[pass_name(n)] = {"seconds": t_base + time.perf_counter() - start}
         t_net = time.perf_counter() - start
         log(f"scene {index} ({scene.name}): baseline {t_base:.1f} s, network ({args.passes} passes) {t_net:.2f} s")
         scenes.append({"gt": rendered.tile_disparity, "confidence": rendered.tile_confidence,
-                       "spread": rendered.tile_spread, "estimates": estimates})
+                       "spread": rendered.tile_spread, "estimates": estimates, "surfaces": rendered.tile_surfaces,
+                       "confidences": {"LMA baseline": base_estimate.strength}, "per_frame": costs})
 
     methods = ["LMA baseline"] + [pass_name(n) for n in range(1, args.passes + 1)]
     title = (f"TPNET vs the LMA baseline, {args.scenes} held-out rendered scenes of {args.width}x{args.height} "

@@ -1,8 +1,10 @@
-"""Shared by the accuracy benches (bench_accuracy, bench_network): their scene options, per-class statistics, RMSE
-vs 3x3 spread, table, PNG plot."""
+"""Shared by the accuracy benches (bench_accuracy, bench_network): their scene options, per-class statistics
+(strict and either-surface gross, own-inlier and reference-tile RMSE, new gross errors, coverage, confidence
+ranking; tpnet_gpu/evaluation.py), per-frame costs, RMSE vs 3x3 spread, table, PNG plot."""
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -26,50 +28,136 @@ def scene_arguments(parser, bench: str, *, scenes: int, width: int, height: int,
     parser.add_argument("--png", default=f"out/bench_{bench}.png", help="RMSE-vs-spread plot ('' to skip)")
 
 
+def _concat(scenes: list[dict], get) -> np.ndarray | None:
+    """``get(scene)`` of every scene flattened over tiles and joined (None if any scene has none)."""
+    parts = [get(s) for s in scenes]
+    if any(p is None for p in parts):
+        return None
+    return np.concatenate([np.asarray(p).reshape(-1, *np.shape(p)[2:]) for p in parts])
+
+
 def summarise(scenes: list[dict], methods: list[str], reference: str | None = None) -> tuple[dict, dict]:
-    """``scenes``: dicts with ``gt``, ``confidence``, ``spread`` ``(ty, tx)`` and ``estimates`` {method: (ty, tx)}.
-    Returns (stats {method: {class: error_stats}}, curves {method: [per spread bin error_stats]}); with a
-    ``reference`` method, stats also hold ``rmse_common`` on the tiles it gets within 1 px (the paper's protocol)."""
+    """``scenes``: dicts with ``gt``, ``confidence``, ``spread`` ``(ty, tx)`` and ``estimates`` {method: (ty, tx)};
+    optional ``surfaces`` ``(ty, tx, K, 3)`` (``Rendered.tile_surfaces``) and ``confidences`` {method: (ty, tx)}
+    (the method's own confidence, higher = surer). Returns (stats {method: {class: error_stats}}, curves
+    {method: [per spread bin error_stats]}). With a ``reference`` method, stats also hold ``rmse_common`` and
+    ``new_gross`` / ``new_gross_share`` on the tiles it gets within 1 px (the paper's protocol); with surfaces in
+    every scene, ``gross_either``; every class also holds ``confidence_ranking`` (evaluation.confidence_ranking,
+    None for a method without confidences in every scene). See tpnet_gpu/evaluation.py for the definitions."""
     gt = np.concatenate([s["gt"].ravel() for s in scenes])
     common = None if reference is None else np.concatenate(
         [evaluation.reference_inliers(s["estimates"][reference], s["gt"]).ravel() for s in scenes])
+    surfaces = _concat(scenes, lambda s: s.get("surfaces"))
     per_scene = [evaluation.tile_classes(s["gt"], s["confidence"], s["spread"]) for s in scenes]
     masks = {c: np.concatenate([m[c].ravel() for m in per_scene]) for c in CLASSES}
     s3 = np.concatenate([evaluation.neighbourhood_spread(s["gt"]).ravel() for s in scenes])
     stats, curves = {}, {}
     for method in methods:
         est = np.concatenate([s["estimates"][method].ravel() for s in scenes])
-        stats[method] = {c: evaluation.error_stats(est, gt, masks[c], common) for c in CLASSES}
+        conf = _concat(scenes, lambda s: s.get("confidences", {}).get(method))  # noqa: B023
+        stats[method] = {c: {**evaluation.error_stats(est, gt, masks[c], common, surfaces),
+                             "confidence_ranking": evaluation.confidence_ranking(est, conf, gt, masks[c],
+                                                                                 surfaces=surfaces)}
+                         for c in CLASSES}
         curves[method] = [
             {"spread_low": low, "spread_high": high,
-             **evaluation.error_stats(est, gt, masks["all"] & (s3 >= low) & (s3 < high), common)}
+             **evaluation.error_stats(est, gt, masks["all"] & (s3 >= low) & (s3 < high), common, surfaces)}
             for low, high in zip(evaluation.SPREAD_BINS[:-1], evaluation.SPREAD_BINS[1:])]
     return stats, curves
 
 
-def table(stats: dict, title: str, reference: str) -> list[str]:
-    """Text table: per method and class rmse, rmse without gross errors, median, gross share, coverage (and
-    ``rmse-ref``, the RMSE on the tiles ``reference`` gets within 1 px, when the stats hold it); then the
-    ratios of every other method to ``reference``."""
-    methods = list(stats)
-    common = "rmse_common" in stats[methods[0]]["all"]
-    keys = ("rmse", "rmse_inliers") + (("rmse_common",) if common else ())
-    width = 45 if common else 37
-    header = "rmse rmse-in " + ("rmse-ref " if common else "") + "median gross cover"
-    lines = [title + "; gross = |error| > 1 px, rmse-in = RMSE without them"
-             + (f", rmse-ref = RMSE on the tiles {reference} gets within 1 px (the paper's protocol)" if common else ""),
-             f"{'method':36} | " + " | ".join(f"{c:^{width}}" for c in CLASSES),
-             f"{'':36} | " + " | ".join(f"{header:>{width}}" for _ in CLASSES),
-             "-" * (39 + (width + 3) * len(CLASSES))]
+PER_FRAME = {"tile_passes": ("passes", "{:9.0f}"), "seconds": ("s/frame", "{:8.2f}")}  # key: (column, format)
+
+
+def per_frame(scenes: list[dict], methods: list[str]) -> dict:
+    """The costs the bench handed in per scene (``scene["per_frame"]`` = {method: {"tile_passes": tile
+    measurements that frame took, "seconds": its wall time}}, any subset), averaged over the scenes that report
+    each: {method: {key: mean}} (methods or keys no scene reports are left out)."""
+    out = {}
     for method in methods:
-        cells = [f"{v['rmse']:6.3f} {v['rmse_inliers']:7.3f} " + (f"{v['rmse_common']:8.3f} " if common else "")
-                 + f"{v['median_abs']:6.3f} {v['gross']:5.1%} {v['coverage']:5.0%}"
-                 for v in (stats[method][c] for c in CLASSES)]
-        lines.append(f"{method:36} | " + " | ".join(f"{cell:>{width}}" for cell in cells))
-    for cls in ("flat", "edge", "all"):
-        for key in keys:
-            lines.append(f"{cls} tiles, {key} ratio method / {reference}: " + ", ".join(
-                f"{m}: {stats[m][cls][key] / stats[reference][cls][key]:.2f}x" for m in methods if m != reference))
+        values = {}
+        for scene in scenes:
+            for key, value in (scene.get("per_frame") or {}).get(method, {}).items():
+                if value is not None:
+                    values.setdefault(key, []).append(float(value))
+        if values:
+            out[method] = {key: float(np.mean(v)) for key, v in values.items()}
+    return out
+
+
+def _rate(value, width: int, digits: int = 1) -> str:
+    """A share as a percentage, right-aligned; blank for None, '-' for NaN (no tiles)."""
+    if value is None:
+        return " " * width
+    return f"{'-' if np.isnan(value) else f'{value:.{digits}%}':>{width}}"
+
+
+def _px(value, width: int) -> str:
+    """Pixels with 3 decimals, right-aligned; blank for None, '-' for NaN (no tiles)."""
+    if value is None:
+        return " " * width
+    return f"{'-' if np.isnan(value) else f'{value:.3f}':>{width}}"
+
+
+def _ratio(value: float, reference: float) -> str:
+    ratio = value / reference if reference else float("nan")
+    return "-" if np.isnan(ratio) else f"{ratio:.2f}x"
+
+
+def _ranking_cell(ranking: list[dict] | None, index: int) -> str:
+    if ranking is None:
+        return ""
+    row = ranking[index]
+    either = "/" + _rate(row["gross_either"], 6).strip() if "gross_either" in row else ""
+    return _rate(row["gross"], 6).strip() + either
+
+
+def table(stats: dict, title: str, reference: str, per_frame: dict | None = None) -> list[str]:
+    """Text table (about 140 characters wide with the benches' method names): a legend, then one block of rows
+    per tile class, a row per method: strict and either-surface gross shares, RMSE on the method's own inliers,
+    ``rmse-ref`` and its ratio to ``reference``'s (``x ref``), the tiles it makes gross that ``reference`` had
+    within 1 px, coverage, the gross shares among its most confident tiles (when it has confidences) and its
+    tile-passes and seconds per frame (``per_frame``, as :func:`per_frame`). Blank where absent: no
+    confidences, no costs handed in, no reference in the stats (rmse-ref, x ref, new-gross)."""
+    per_frame = per_frame or {}
+    methods = list(stats)
+    first = stats[methods[0]]["all"]
+    common = "rmse_common" in first
+    ranking = next((stats[m]["all"]["confidence_ranking"] for m in methods
+                    if stats[m]["all"].get("confidence_ranking")), None)
+    fractions = [r["fraction"] for r in ranking] if ranking else []
+    name = max(6, *(len(m) for m in methods))
+    tops = [f"top {f:.0%}" for f in fractions]
+    head = (f"{'method':{name}} | {'gross':>6} {'either':>6} {'rmse-in':>7} {'rmse-ref':>8} {'x ref':>7} "
+            f"{'new-gross':>11} {'cover':>5} | " + " ".join(f"{t:>13}" for t in tops) + (" | " if tops else "")
+            + " ".join(f"{column:>{len(fmt.format(0))}}" for column, fmt in PER_FRAME.values()))
+    legend = ("gross: |error| > 1 px (error: vs the centre ray's disparity); either: > 1 px from every surface "
+              f"covering >= {evaluation.MIN_SURFACE_SHARE:.0%} of the tile's 16x16 window; rmse-in: RMSE on the "
+              "method's own inliers (|error| <= 1 px); "
+              + (f"rmse-ref: RMSE on the tiles {reference} gets within 1 px (the paper's protocol), x ref: its ratio "
+                 f"to {reference}'s; new-gross: tiles {reference} gets within 1 px that the method makes gross "
+                 "(count, share of them); " if common else "")
+              + "cover: share of the tiles with an estimate; "
+              + ("top N %: gross/either among the method's most confident N % of its estimates; " if tops else "")
+              + "passes: tile-passes per frame, s/frame: seconds per frame (as the bench measured)")
+    lines = [title, *textwrap.wrap(legend, len(head)), head, "-" * len(head)]
+    for cls in CLASSES:
+        lines.append(f"{cls} ({stats[methods[0]][cls]['tiles']} tiles)")
+        for method in methods:
+            v = stats[method][cls]
+            new = "" if not common else "(ref)" if method == reference else (
+                f"{v['new_gross']} {_rate(v['new_gross_share'], 5).strip()}")
+            ratio = "" if not common else _ratio(v["rmse_common"], stats[reference][cls]["rmse_common"])
+            costs = per_frame.get(method, {})
+            cells = [f"{method:{name}} | {_rate(v['gross'], 6)} {_rate(v.get('gross_either'), 6)} "
+                     f"{_px(v['rmse_inliers'], 7)} {_px(v.get('rmse_common'), 8)} {ratio:>7} {new:>11} "
+                     f"{_rate(v['coverage'], 5, 0)} |"]
+            if tops:
+                cells.append(" ".join(f"{_ranking_cell(v['confidence_ranking'], i):>13}" for i in range(len(tops)))
+                             + " |")
+            cells.append(" ".join(fmt.format(costs[key]) if key in costs else " " * len(fmt.format(0))
+                                  for key, (_, fmt) in PER_FRAME.items()))
+            lines.append(" ".join(cells).rstrip())
     return lines
 
 
@@ -99,13 +187,14 @@ def plot(curves: dict, path, title: str = "") -> None:
 
 def publish(scenes: list[dict], methods: list[str], title: str, reference: str, meta: dict, json_path, png_path,
             log=print) -> dict:
-    """The accuracy benches' common end: statistics (with ``rmse_common`` against ``reference``), the table
-    printed, the JSON (``meta`` + stats, curves and table) and the RMSE-vs-spread PNG written (each unless its
-    path is empty). Returns the report."""
+    """The accuracy benches' common end: statistics (:func:`summarise`, against ``reference``), the per-frame
+    costs (:func:`per_frame`), the table printed, the JSON (``meta`` + stats, per_frame, curves and table) and
+    the RMSE-vs-spread PNG written (each unless its path is empty). Returns the report."""
     stats, curves = summarise(scenes, methods, reference=reference)
-    lines = table(stats, title, reference=reference)
+    costs = per_frame(scenes, methods)
+    lines = table(stats, title, reference=reference, per_frame=costs)
     print("\n".join(lines))
-    report = {**meta, "stats": stats, "rmse_by_spread": curves, "table": lines}
+    report = {**meta, "stats": stats, "per_frame": costs, "rmse_by_spread": curves, "table": lines}
     saved = []
     if json_path:
         saved.append(str(save_json(report, json_path)))

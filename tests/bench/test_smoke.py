@@ -22,8 +22,20 @@ from tpnet_gpu.bench.throughput_report import ROWS
 
 TINY = ["--height", "32", "--width", "48", "--repeat", "1", "--device", "cpu"]  # 4 x 6 tiles
 SPEED_KEYS = {"frame", "timing", "stages", "device", "machine", "paper", "agreement"}
-ACCURACY_KEYS = {"bench", "scenes", "width", "height", "seed", "machine", "stats", "rmse_by_spread", "table"}
+ACCURACY_KEYS = {"bench", "scenes", "width", "height", "seed", "machine", "stats", "per_frame", "rmse_by_spread",
+                 "table"}
 CLASSES = {"flat", "edge", "low_texture", "all"}
+CLASS_STATS = {"tiles", "coverage", "rmse", "median_abs", "gross", "gross_either", "rmse_inliers", "rmse_common",
+               "new_gross", "new_gross_share", "confidence_ranking"}  # evaluation.error_stats + confidence_ranking
+
+
+def _check_accuracy(report: dict, ranked: set) -> None:
+    """Every method: the class statistics (with the reference's and the surfaces' keys), a confidence ranking
+    for the ``ranked`` methods only, and its seconds per frame."""
+    for method, stats in report["stats"].items():
+        assert set(stats) == CLASSES and all(set(s) == CLASS_STATS for s in stats.values()), method
+        assert (stats["all"]["confidence_ranking"] is not None) == (method in ranked), method
+        assert report["per_frame"][method]["seconds"] > 0
 
 
 @pytest.fixture(autouse=True)
@@ -95,7 +107,7 @@ def test_bench_accuracy(tmp_path, capsys):
     assert ACCURACY_KEYS | {"peer_passes", "optics", "sensor"} <= set(report)
     assert list(report["stats"]) == ["baseline (G phase correlation)", "baseline (as-coded colour weights)",
                                      "opencv-StereoSGBM", "opencv-phaseCorrelate", "skimage-phase_cross_correlation"]
-    assert all(set(s) == CLASSES for s in report["stats"].values())
+    _check_accuracy(report, {"baseline (G phase correlation)", "baseline (as-coded colour weights)"})
     assert report["table"][0] in out and "[bench_accuracy]" in err
     assert png is None or png.stat().st_size > 0
 
@@ -106,7 +118,7 @@ def test_bench_network(tmp_path, capsys):
     report, out, err = run_bench(bench_network, argv, tmp_path, capsys)
     assert ACCURACY_KEYS | {"passes"} <= set(report)
     assert list(report["stats"]) == ["LMA baseline", "TPNET (1 pass)"]
-    assert all(set(s) == CLASSES for s in report["stats"].values())
+    _check_accuracy(report, {"LMA baseline"})
     assert report["table"][0] in out and "[bench_network]" in err
     assert png is None or png.stat().st_size > 0
 

@@ -37,3 +37,15 @@ def test_cli_inspect_reads_back(tmp_path, capsys):
     assert "4 cameras, 64x48, CFA GRBG (read through rawpy)" in out and "tile_disparity" in out
     assert main(["inspect", str(tmp_path / "missing")]) == 2
     assert "missing scene.json" in capsys.readouterr().err
+
+
+def test_old_folder_gets_tile_surfaces(tmp_path):
+    """A folder written before ``tile_surfaces`` existed (its ground-truth NPZ without them) loads with them,
+    rebuilt from its per-pixel disparity and objects. Oracle: the rendered ``tile_surfaces``."""
+    rig = Rig(width=64, height=48)
+    rendered = render(demo_scene(rig), rig, supersample=1)
+    folder = save(rendered, tmp_path / "scene", previews=False)
+    gt = dict(np.load(folder / "ground_truth.npz"))
+    del gt["tile_surfaces"]
+    np.savez_compressed(folder / "ground_truth.npz", **gt)
+    np.testing.assert_array_equal(load(folder).ground_truth["tile_surfaces"], rendered.tile_surfaces)

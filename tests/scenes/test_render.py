@@ -109,3 +109,35 @@ def test_rendered_plane_peaks_at_its_disparity_in_the_reference():
         for tile in corr:
             iy, ix = np.unravel_index(np.argmax(tile), tile.shape)
             assert (ix - 7, iy - 7) == tuple(np.round(-d * axis).astype(int))
+
+
+def test_window_surfaces_on_hand_made_maps():
+    """Oracle: hand-counted windows of a 16x16 image (2x2 tiles; tile (tx, ty) reads x, y in [8 tx - 4, 8 tx + 12),
+    clipped to the image: 12x12 pixels here): object 0 at 2 px for x < 8, object 1 slanted (0.1 x px) beyond."""
+    from tpnet_gpu.scenes.render import window_surfaces
+
+    x = np.arange(16)[None, :].repeat(16, axis=0)
+    objects = np.where(x < 8, 0, 1)
+    disparity = np.where(x < 8, 2.0, 0.1 * (x + 0.5))  # pixel-centre disparity of the slanted plane
+    out = window_surfaces(disparity, objects, surfaces=3)
+    assert out.shape == (2, 2, 3, 3) and out.dtype == np.float32
+    for ty in range(2):  # columns 0..11: 8 of object 0, 4 of object 1 (x 8..11); columns 4..15: 4 and 8
+        np.testing.assert_allclose(out[ty, 0, :2], [[2 / 3, 2.0, 2.0], [1 / 3, 0.85, 1.15]], rtol=1e-6)
+        np.testing.assert_allclose(out[ty, 1, :2], [[2 / 3, 0.85, 1.55], [1 / 3, 2.0, 2.0]], rtol=1e-6)
+    assert np.isnan(out[:, :, 2]).all()
+    one = window_surfaces(disparity, objects, surfaces=1)  # the largest only
+    np.testing.assert_array_equal(one[:, :, 0], out[:, :, 0])
+
+
+def test_rendered_surfaces_of_a_slanted_plane():
+    """Oracle: a plane tilted 70 degrees is one surface: every window has one, of share 1, and its range holds
+    the centre ray's disparity and spans the window's spread."""
+    rng = np.random.default_rng(3)
+    slanted = plane(RIG, 10.0, tx.noise_texture(rng, 256), tilt_deg=70.0)
+    out = render(Scene([slanted], Sky()), RIG, supersample=1, noise=False)
+    s = out.tile_surfaces[1:-1, 1:-1]
+    np.testing.assert_allclose(s[..., 0, 0], 1.0)
+    assert np.isnan(s[..., 1:, :]).all()
+    np.testing.assert_allclose(s[..., 0, 2] - s[..., 0, 1], out.tile_spread[1:-1, 1:-1], rtol=1e-5)
+    gt = out.tile_disparity[1:-1, 1:-1]
+    assert np.all((s[..., 0, 1] <= gt + 1e-5) & (gt - 1e-5 <= s[..., 0, 2])) and out.tile_spread.min() > 0.5

@@ -12,7 +12,7 @@ import numpy as np
 from tpnet_gpu import rawio
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.images import colour_ramp, raw_preview, save_png
-from tpnet_gpu.scenes.render import Rendered
+from tpnet_gpu.scenes.render import Rendered, window_surfaces
 
 
 def save(rendered: Rendered, folder, *, name: str = "scene", optics=None, previews: bool = True) -> Path:
@@ -43,7 +43,8 @@ class LoadedScene:
 
 
 def load(folder) -> LoadedScene:
-    """Read a scene folder (DNGs through rawpy) into float frames and its rig."""
+    """Read a scene folder (DNGs through rawpy) into float frames and its rig. A folder written before
+    ``tile_surfaces`` existed gets them from its per-pixel ``disparity`` and ``objects``."""
     scene = rawio.read_scene(folder)
     frames = rawio.stack_normalised(scene.frames)
     rig_json = (scene.camera or {}).get("rig")
@@ -53,4 +54,7 @@ def load(folder) -> LoadedScene:
             f"{folder}: scene.json describes {rig.cams} cameras of {rig.width}x{rig.height}, "
             f"the files hold {frames.shape[0]} of {frames.shape[2]}x{frames.shape[1]}"
         )
-    return LoadedScene(frames, scene.frames[0].cfa, rig, scene.ground_truth, Path(folder))
+    gt = dict(scene.ground_truth)
+    if "tile_surfaces" not in gt and {"disparity", "objects"} <= gt.keys():
+        gt["tile_surfaces"] = window_surfaces(gt["disparity"], gt["objects"])
+    return LoadedScene(frames, scene.frames[0].cfa, rig, gt, Path(folder))

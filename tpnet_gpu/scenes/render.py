@@ -5,7 +5,8 @@ camera's model (distortion, principal point, extrinsics; ``Rig.pixel_rays``) fro
 ray/plane intersections), then optics (lateral chromatic aberration as a radial per-colour magnification,
 a Gaussian blur growing toward the field edge), the Bayer mosaic, photon (Poisson) and read noise, and
 quantisation. Ground truth comes from the virtual centre camera: per-pixel disparity, and per tile the
-disparity at the tile centre, the depth spread over its 16x16 window and a confidence.
+disparity at the tile centre, the depth spread over its 16x16 window, a confidence and the surfaces the window
+sees (:func:`window_surfaces`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,9 @@ from tpnet_gpu.scenes.objects import Scene
 
 ROWS_PER_CHUNK = 64
 BLUR_LEVELS = 4
+SURFACES = 4  # surfaces kept per tile window (Rendered.tile_surfaces), the largest first
+SURFACE_SHARE, SURFACE_LOW, SURFACE_HIGH = 0, 1, 2  # the last axis of Rendered.tile_surfaces
+_OFF_IMAGE = np.iinfo(np.int32).min  # object index padding the windows that fall off the image
 LUMA = np.array([0.2126, 0.7152, 0.0722])  # linear RGB -> luminance
 
 
@@ -74,6 +78,9 @@ class Rendered:
         tile_disparity: ``(tiles_y, tiles_x)`` disparity at each tile centre (8 tx + 4, 8 ty + 4).
         tile_spread: ``(tiles_y, tiles_x)`` max - min ground-truth disparity over the tile's 16x16 window.
         tile_confidence: ``(tiles_y, tiles_x)`` in [0, 1]: low where the window has no texture or mixes objects.
+        tile_surfaces: ``(tiles_y, tiles_x, SURFACES, 3)`` float32, the surfaces (objects, the sky included)
+            the tile's 16x16 window sees, largest first, NaN-padded: (share of the window's in-image pixels,
+            min, max disparity of its pixels there); see :func:`window_surfaces`.
         sensor, rig: what made it.
     """
 
@@ -83,13 +90,15 @@ class Rendered:
     tile_disparity: np.ndarray
     tile_spread: np.ndarray
     tile_confidence: np.ndarray
+    tile_surfaces: np.ndarray
     sensor: Sensor
     rig: Rig
 
     def ground_truth(self) -> dict:
         """The ground truth as a dict of arrays (for scene folders)."""
         return {"disparity": self.disparity, "objects": self.objects, "tile_disparity": self.tile_disparity,
-                "tile_spread": self.tile_spread, "tile_confidence": self.tile_confidence}
+                "tile_spread": self.tile_spread, "tile_confidence": self.tile_confidence,
+                "tile_surfaces": self.tile_surfaces}
 
 
 def _radiance(scene: Scene, rig: Rig, cam: int, supersample: int) -> np.ndarray:
@@ -187,6 +196,46 @@ def tile_ground_truth(scene: Scene, rig: Rig, disparity, objects, luminance, *, 
     return tile_d.astype(np.float32), spread.astype(np.float32), confidence.astype(np.float32)
 
 
+def _tile_windows(image: np.ndarray, fill) -> np.ndarray:
+    """``(tiles_y, tiles_x, 16, 16)`` view of every tile's window (starting at (8 tx - 4, 8 ty - 4)) of
+    ``image`` padded by 4 pixels of ``fill``."""
+    tiles_y, tiles_x = image.shape[0] // 8, image.shape[1] // 8
+    padded = np.pad(image, 4, mode="constant", constant_values=fill)
+    return np.lib.stride_tricks.sliding_window_view(padded, (16, 16))[::8, ::8][:tiles_y, :tiles_x]
+
+
+def window_surfaces(disparity: np.ndarray, objects: np.ndarray, *, surfaces: int = SURFACES) -> np.ndarray:
+    """The surfaces each tile's 16x16 window sees, ``(tiles_y, tiles_x, surfaces, 3)`` float32.
+
+    A surface is one scene object (one plane, slanted or not; the sky is one more, index -1) as the per-pixel
+    ``objects`` map of the virtual camera shows it. Per tile and surface: its share of the window's pixels that
+    lie inside the image, and the min and max ``disparity`` of those of its pixels (a slanted plane spans a
+    range; a plane seen in two pieces spans both). The ``surfaces`` largest, by pixel count (ties: lower
+    object index first), NaN rows after the last one the window sees."""
+    disparity = np.asarray(disparity, dtype=np.float32)
+    objects = np.asarray(objects, dtype=np.int32)
+    wo = _tile_windows(objects, _OFF_IMAGE)
+    wd = _tile_windows(disparity, np.nan)
+    inside = (wo != _OFF_IMAGE).sum(axis=(-2, -1))
+    ids = np.unique(objects)
+    counts = np.zeros((len(ids), *inside.shape), dtype=np.int32)
+    low = np.full(counts.shape, np.nan, dtype=np.float32)
+    high = np.full(counts.shape, np.nan, dtype=np.float32)
+    for i, obj in enumerate(ids):
+        seen = wo == obj
+        counts[i] = seen.sum(axis=(-2, -1))
+        low[i] = np.where(seen, wd, np.inf).min(axis=(-2, -1))
+        high[i] = np.where(seen, wd, -np.inf).max(axis=(-2, -1))
+    order = np.argsort(-counts, axis=0, kind="stable")[:surfaces]
+    pick = lambda a: np.take_along_axis(a, order, axis=0)  # noqa: E731
+    count = pick(counts)
+    rows = np.stack([count / inside, pick(low), pick(high)], axis=-1).astype(np.float32)
+    rows[count == 0] = np.nan
+    out = np.full((*inside.shape, surfaces, 3), np.nan, dtype=np.float32)
+    out[:, :, : len(order)] = np.moveaxis(rows, 0, 2)
+    return out
+
+
 def render(scene: Scene, rig: Rig = Rig(), *, optics: Optics = Optics(), sensor: Sensor = Sensor(),
            supersample: int = 2, seed: int = 0, noise: bool = True, progress=None) -> Rendered:
     """Render ``scene`` for every camera of ``rig``; deterministic for ``seed``. ``progress``: optional
@@ -205,4 +254,5 @@ def render(scene: Scene, rig: Rig = Rig(), *, optics: Optics = Optics(), sensor:
         raws[cam] = expose(planes, sensor, rng)
     disparity, objects, luminance = _ground_truth(scene, rig)
     tile_d, spread, confidence = tile_ground_truth(scene, rig, disparity, objects, luminance)
-    return Rendered(raws, disparity, objects, tile_d, spread, confidence, sensor, rig)
+    surfaces = window_surfaces(disparity, objects)
+    return Rendered(raws, disparity, objects, tile_d, spread, confidence, surfaces, sensor, rig)
