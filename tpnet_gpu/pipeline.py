@@ -113,7 +113,7 @@ class Pipeline:
         if self.model is not None:
             tp = self.network_tp
             if tp is not self.engine.tp:
-                tp.load(frames)
+                tp.load(self.engine.normalise(frames))
             # tiles the refinement left unmeasured are read at the first stage's answer (always finite)
             target = torch.where(measured, initial, result.search)
             for _ in range(cfg.network_passes):
@@ -125,6 +125,7 @@ class Pipeline:
             tp.convert()
             tp.texture()
             texture = tp.result.texture
+            texture[:-1] /= self.engine.scale  # colours back in the frames' units (alpha is unitless)
         confidence = torch.where(measured, result.strength, torch.zeros_like(result.strength))
         return FrameResult(disparity, confidence, initial, tp.result.valid.view(self.grid), texture, result.search,
                            result.tile_passes)

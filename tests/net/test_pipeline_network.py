@@ -16,6 +16,7 @@ import torch
 from tpnet_gpu import evaluation
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.cli import main
+from tpnet_gpu.disparity.engine import REFERENCE_LEVEL
 from tpnet_gpu.net import infer
 from tpnet_gpu.pipeline import Pipeline, load_frames
 from tpnet_gpu.processor import TileProcessor
@@ -76,7 +77,9 @@ def test_pipeline_returns_the_networks_output(scene):
     measured = np.isfinite(initial)
     tp = TileProcessor(HEIGHT, WIDTH, cfa=rendered.sensor.cfa, config=infer.correlation(), device="cpu")
     target = torch.from_numpy(np.where(measured, initial, result["search"]).astype(np.float32))
-    layers = tp.process(frames, target).layers
+    # the engine scales the frames to a reference mean level before correlating (tpnet_gpu/disparity/engine.py)
+    scaled = frames * np.float32(REFERENCE_LEVEL / np.abs(frames).mean())
+    layers = tp.process(scaled, target).layers
     expected = infer.infer(infer.load(), layers, target, grid=(tp.tiles_y, tp.tiles_x)).numpy()
     np.testing.assert_allclose(result["disparity"][measured], expected[measured], rtol=0, atol=1e-4)
     assert np.isnan(result["disparity"][~measured]).all()

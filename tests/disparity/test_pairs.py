@@ -1,0 +1,58 @@
+"""Pair geometry and axis sampling (tpnet_gpu/disparity/pairs.py). Oracles: the quad's pair directions of the
+spec (geometry_and_lma.md B.1), explicit window sums, and synthetic correlations with a peak at a known lag."""
+
+import numpy as np
+import pytest
+import torch
+
+from tpnet_gpu import tables
+from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs, pair_vectors, window_overlap
+
+
+def test_quad_pair_vectors_are_the_spec_directions():
+    expected = ((1, 0), (1, 0), (0, 1), (0, 1), (1, 1), (1, -1))  # hor-top ... diag-other (B.1)
+    np.testing.assert_array_equal(pair_vectors(tables.QUAD_OFFSETS, tables.QUAD_PAIRS), expected)
+
+
+def test_window_overlap_is_the_window_autocorrelation():
+    w = np.sin(np.pi * (2 * np.arange(16) + 1) / 32)
+    for k in (0, 1, 5, 11):
+        assert window_overlap(k) == pytest.approx(np.dot(w[: 16 - k], w[k:]) / np.dot(w, w), abs=1e-12)
+    assert window_overlap(16) == 0.0 and window_overlap(-3) == window_overlap(3)
+
+
+def gaussian_peaks(vectors: np.ndarray, e: float, sigma: float = 1.2) -> torch.Tensor:
+    """``(1, P, 15, 15)`` correlations with a Gaussian peak at lag -e v per pair, scaled by the window overlap
+    there (what a true shift of e does to a windowed tile)."""
+    lags = np.arange(-7, 8)
+    out = []
+    for vx, vy in vectors:
+        x0, y0 = -e * vx, -e * vy
+        g = np.exp(-((lags[None, :] - x0) ** 2 + (lags[:, None] - y0) ** 2) / (2 * sigma**2))
+        out.append(g * window_overlap(x0) * window_overlap(y0))
+    return torch.tensor(np.array(out)[None], dtype=torch.float32)
+
+
+@pytest.mark.parametrize("offsets, pairs", [
+    (tables.QUAD_OFFSETS, tables.QUAD_PAIRS),
+    (((-0.5, 0.0), (0.5, 0.0)), ((0, 1),)),
+    (((-1.5, 0.0), (-0.5, 0.0), (0.5, 0.0), (1.5, 0.0)), ((0, 1), (0, 3), (1, 2))),
+])
+def test_sampled_axis_peaks_at_the_true_offset_with_full_height(offsets, pairs):
+    sampler = AxisSampler(offsets, pairs, "cpu")
+    vectors = pair_vectors(offsets, pairs)
+    e_true = 1.75
+    corr = gaussian_peaks(vectors, e_true)
+    e = torch.arange(-2.0, 2.01, 0.25)
+    values = sampler.sample(corr, e, "bicubic")
+    combined = combine_pairs(values)[0]
+    assert float(e[torch.argmax(combined)]) == pytest.approx(e_true)
+    assert float(combined.max()) == pytest.approx(1.0, abs=0.03)  # the overlap loss undone
+
+
+def test_lags_beyond_the_correlation_are_nan_and_left_out():
+    sampler = AxisSampler(((-1.5, 0.0), (1.5, 0.0), (-0.5, 0.0)), ((0, 1), (2, 1)), "cpu")  # |v| = 3 and 2
+    values = sampler.sample(torch.ones(1, 2, 15, 15), torch.tensor([3.0]))  # lags -9 and -6
+    assert torch.isnan(values[0, 0, 0]) and torch.isfinite(values[0, 1, 0])
+    assert torch.isfinite(combine_pairs(values)).all()
+    assert torch.isnan(combine_pairs(torch.full((1, 2, 1), float("nan")))).all()
