@@ -29,7 +29,8 @@ MINIMAL = {"width": 64, "height": 48, "pixel_size_mm": 0.0022, "focal_mm": 4.5, 
 
 
 @pytest.mark.parametrize("suffix", [".json", ".toml"])
-@pytest.mark.parametrize("rig", [Rig(), CALIBRATED, Rig(offsets=((-0.5, 0.0), (0.5, 0.0)))], ids=["quad", "calibrated", "pair"])
+@pytest.mark.parametrize("rig", [Rig(), CALIBRATED, Rig(offsets=((-0.5, 0.0), (0.5, 0.0)))],
+                         ids=["quad", "calibrated", "pair"])
 def test_round_trip(tmp_path, rig, suffix):
     path = write_rig(rig, tmp_path / f"rig{suffix}", description='a "test" rig \u00e9')
     back = read_rig(path)
