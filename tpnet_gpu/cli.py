@@ -184,7 +184,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="rig file (.json/.toml, docs/rig_file.md) or a shipped one: quad, binocular, two_quads")
     proc.add_argument("--max-disparity", default=None, metavar="PX",
                       help="largest disparity searched, pixels (> 0); required for ordinary images")
-    proc.add_argument("--min-disparity", default="0", metavar="PX", help="smallest disparity searched, pixels")
+    proc.add_argument("--min-disparity", default="0", metavar="PX",
+                      help="smallest disparity searched, pixels (default 0; less than the maximum)")
     proc.add_argument("--colour", choices=("luma", "mean", "green"), default="luma",
                       help="RGB images to mono: BT.601 luma (0.299 R + 0.587 G + 0.114 B), the mean, or green")
     proc.add_argument("--reference", default="auto", metavar="CAM",
