@@ -54,6 +54,7 @@ def test_wheel_holds_every_module_and_the_weights(wheel):
                if module.replace(".", "/") + ".py" not in names and module.replace(".", "/") + "/__init__.py" not in names]
     assert not missing, f"not in the wheel: {missing}"
     assert any(n.startswith("tpnet_gpu/net/weights/") and n.endswith(".pt") for n in names)
+    assert {f"tpnet_gpu/rigs/{n}.json" for n in ("quad", "binocular", "two_quads")} <= names  # example rig files
 
 
 @pytest.mark.slow

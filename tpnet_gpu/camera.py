@@ -13,7 +13,7 @@ Convention
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -232,6 +232,37 @@ class Rig:
         c = self.undistort(np.asarray(pixels, dtype=np.float64) - self.centre)
         z = -self.focal_mm * self.baseline_mm / (d * self.pixel_size_mm)
         return np.stack([c[..., 0] * self.baseline_mm / d, -c[..., 1] * self.baseline_mm / d, z], axis=-1)
+
+    # --- reference camera and rig files (rig_file.md §5, §1) ------------------------------------------------
+    def referenced_to(self, cam: int) -> Rig:
+        """The same rig with every offset shifted by ``-offsets[cam]``, so that camera ``cam`` has offset (0, 0).
+
+        The virtual camera - whose pixels the tile grid and the disparity maps are in - then sits at camera
+        ``cam``'s lens: with the ideal geometry, camera ``cam``'s tile centres are exactly the tile grid
+        (8 tx + 4, 8 ty + 4) at every disparity, and every camera's tile centres move by ``d * offsets[cam]``.
+        Nothing else uses absolute offsets: disparity and distance, distortion, principal points, the
+        extrinsic corrections and ``pixel_rays`` are unchanged, pair directions (offset differences) too;
+        world coordinates (``lens_positions``, ``world_to_image``, ``image_to_world``) get their origin at
+        camera ``cam``'s lens, so a world point's pixel in every camera stays the same.
+        """
+        if isinstance(cam, bool) or not isinstance(cam, (int, np.integer)) or not 0 <= cam < self.cams:
+            raise ValueError(f"cam: expected a camera index in 0..{self.cams - 1}, got {cam!r}")
+        r = self.offsets_array()
+        shifted = tuple(tuple(float(v) for v in row) for row in r - r[cam])
+        return replace(self, offsets=shifted, _cache={})
+
+    @classmethod
+    def from_file(cls, path) -> Rig:
+        """Read a rig file, JSON or TOML (``tpnet_gpu.rigfile.read_rig``; format in docs/rig_file.md)."""
+        from tpnet_gpu.rigfile import read_rig  # noqa: PLC0415 - rigfile imports this module
+
+        return read_rig(path)
+
+    def to_file(self, path, *, description: str | None = None):
+        """Write this rig as a rig file, JSON (``.json``) or TOML (``.toml``); returns the path."""
+        from tpnet_gpu.rigfile import write_rig  # noqa: PLC0415 - rigfile imports this module
+
+        return write_rig(self, path, description=description)
 
     def to_json(self) -> dict:
         """Plain-JSON description (for scene folders)."""

@@ -4,6 +4,7 @@ traceback (exit status 2)."""
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 
@@ -16,6 +17,19 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _disparity(text: str | None, option: str, *, positive: bool) -> float | None:
+    """A finite number of pixels from an option's text (checked here, so that a bad one is a one-line error)."""
+    if text is None:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or (positive and value <= 0):
+        raise ValueError(f"{option}: expected a {'positive ' if positive else ''}number of pixels, got {text!r}")
+    return value
+
+
 def _cmd_process(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -24,29 +38,39 @@ def _cmd_process(args: argparse.Namespace) -> int:
 
     from tpnet_gpu.demo import _upscale, texture_rgba
     from tpnet_gpu.images import colour_ramp, save_png
-    from tpnet_gpu.pipeline import Pipeline, load_frames
+    from tpnet_gpu.stereo_io import load_inputs, make_pipeline
 
-    if len(args.inputs) not in (1, 4):
-        raise ValueError(f"inputs: expected a scene folder or 4 raw files (one per camera), got {len(args.inputs)}")
-    frames, cfa = load_frames(args.inputs, cfa=args.cfa)
-    cams, height, width = frames.shape
-    if cams != 4:
-        raise ValueError(f"inputs: expected 4 cameras, got {cams}")
+    max_d = _disparity(args.max_disparity, "--max-disparity", positive=True)
+    min_d = _disparity(args.min_disparity, "--min-disparity", positive=False)
+    if max_d is not None and min_d >= max_d:
+        raise ValueError(f"--min-disparity: expected less than --max-disparity {max_d:g}, got {min_d:g}")
+    inputs = load_inputs(args.inputs, rig=args.rig, cfa=args.cfa, colour=args.colour, reference=args.reference)
+    if inputs.kind in ("pair", "images") and max_d is None:
+        raise ValueError("--max-disparity: required for ordinary images (the largest disparity searched, px)")
+    frames = inputs.frames
+    (height, width), (h, w) = frames.padded, frames.size
     start = time.perf_counter()
-    result = Pipeline(height, width, cfa=cfa, device=args.device, backend=args.backend).process(frames)
+    pipeline = make_pipeline(height, width, cfa=frames.cfa, rig=inputs.rig, min_disparity=min_d, max_disparity=max_d,
+                             device=args.device, backend=args.backend)
+    result = pipeline.process(frames.frames)
     seconds = time.perf_counter() - start
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    disparity = result.disparity.cpu().numpy()
+    disparity = frames.crop_tiles(result.disparity.cpu().numpy())
     tifffile.imwrite(out / "disparity.tif", disparity.astype(np.float32))
-    tifffile.imwrite(out / "confidence.tif", result.confidence.cpu().numpy().astype(np.float32))
-    save_png(out / "disparity.png", _upscale(colour_ramp(disparity, 0.0)))
+    tifffile.imwrite(out / "confidence.tif", frames.crop_tiles(result.confidence.cpu().numpy()).astype(np.float32))
+    save_png(out / "disparity.png", _upscale(colour_ramp(disparity, min_d))[:h, :w])
+    written = "disparity.tif/.png, confidence.tif"
     if result.texture is not None:
-        texture = result.texture.cpu().numpy()
-        tifffile.imwrite(out / "texture.tif", texture.astype(np.float32), photometric="minisblack")  # 4 planes R G B A
-        save_png(out / "texture.png", texture_rgba(texture, float(np.nanpercentile(texture[:3], 99.5))))
-    print(f"processed {width}x{height} quad frame ({cfa}) in {seconds:.1f} s -> {out}: disparity.tif/.png "
-          f"({disparity.shape[1]}x{disparity.shape[0]} tiles), confidence.tif, texture.tif/.png")
+        texture = frames.crop_image(result.texture.cpu().numpy())
+        tifffile.imwrite(out / "texture.tif", texture.astype(np.float32), photometric="minisblack")  # planes R G B A
+        written += ", texture.tif"
+        if texture.shape[0] == 4:
+            save_png(out / "texture.png", texture_rgba(texture, float(np.nanpercentile(texture[:3], 99.5))))
+            written += "/.png"
+    what = {"scene": "scene", "raw": f"raw ({frames.cfa})", "pair": "stereo pair", "images": "image"}[inputs.kind]
+    print(f"processed {w}x{h} {what} frame of {frames.cams} cameras in {seconds:.1f} s -> {out}: {written} "
+          f"({disparity.shape[1]}x{disparity.shape[0]} tiles)")
     return 0
 
 
@@ -148,10 +172,28 @@ def build_parser() -> argparse.ArgumentParser:
                       help="tile-processor kernels (default: taichi on the CPU, warp on CUDA)")
     demo.set_defaults(func=_cmd_demo)
 
-    proc = sub.add_parser("process", help="disparity, confidence and texture of a quad frame (scene folder or 4 raws)")
-    proc.add_argument("inputs", nargs="+", help="a scene folder, or CAM0 CAM1 CAM2 CAM3 raw files (DNG/TIFF)")
+    proc = sub.add_parser("process", help="disparity, confidence and texture of a frame: scene folder, raw quad, "
+                          "stereo pair, or the cameras of a rig file",
+                          description="Inputs: a scene folder; CAM0 CAM1 CAM2 CAM3 raw files (the quad); LEFT RIGHT "
+                                      "ordinary images (a rectified stereo pair, PNG/TIFF; needs --max-disparity); or, "
+                                      "with --rig, one raw file or image per camera of the rig. Outputs are cropped "
+                                      "to the inputs' size (tiles: ceil(size / 8)). See docs/rig_file.md.")
+    proc.add_argument("inputs", nargs="+",
+                      help="SCENE_DIR | CAM0 CAM1 CAM2 CAM3 | LEFT RIGHT | one file per rig camera")
+    proc.add_argument("--rig", default=None, metavar="FILE",
+                      help="rig file (.json/.toml, docs/rig_file.md) or a shipped one: quad, binocular, two_quads")
+    proc.add_argument("--max-disparity", default=None, metavar="PX",
+                      help="largest disparity searched, pixels (> 0); required for ordinary images")
+    proc.add_argument("--min-disparity", default="0", metavar="PX",
+                      help="smallest disparity searched, pixels (default 0; less than the maximum)")
+    proc.add_argument("--colour", choices=("luma", "mean", "green"), default="luma",
+                      help="RGB images to mono: BT.601 luma (0.299 R + 0.587 G + 0.114 B), the mean, or green")
+    proc.add_argument("--reference", default="auto", metavar="CAM",
+                      help="camera the tile grid follows: a camera index, 'rig' (the rig's own reference, its "
+                           "virtual centre camera), or 'auto' (camera 0 = left for a stereo pair, else 'rig')")
     proc.add_argument("--out", default="out/process", help="output folder")
-    proc.add_argument("--cfa", default=None, help="Bayer pattern of TIFF inputs (e.g. GRBG)")
+    proc.add_argument("--cfa", default=None, help="Bayer pattern of TIFF mosaics (e.g. GRBG); without it TIFFs of a "
+                      "rig are read as ordinary images")
     proc.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     proc.add_argument("--backend", choices=BACKENDS, default=None,
                       help="tile-processor kernels (default: taichi on the CPU, warp on CUDA)")

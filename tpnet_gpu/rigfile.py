@@ -1,0 +1,236 @@
+"""Rig calibration files (rig_file.md §1-§4): one JSON object or TOML table whose keys are the fields of
+``tpnet_gpu.camera.Rig``, read into a ``Rig`` and written back from one.
+
+Reading checks every field and names it, with what was expected and what came: unknown keys, missing required
+keys, wrong types or lengths, non-positive lengths and NaN or infinite numbers are refused (``RigFileError``).
+Writing checks the rig the same way first, so every file written reads back into an equal ``Rig``. JSON is read
+and written; TOML is read with ``tomllib`` and written by ``_toml`` (flat keys, numbers and arrays only).
+Example rigs ship in ``tpnet_gpu/rigs/`` (``examples()``); ``resolve`` turns their names into paths.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import numbers
+import tomllib
+from pathlib import Path
+
+from tpnet_gpu.camera import DISTORTION_TERMS, EXTRINSIC_TERMS, Rig
+
+FORMAT = "tpnet-gpu rig"
+VERSION = 1
+SUFFIXES = (".json", ".toml")
+EXAMPLES_DIR = Path(__file__).resolve().parent / "rigs"
+REQUIRED = ("width", "height", "pixel_size_mm", "focal_mm", "baseline_mm", "offsets")
+OPTIONAL = ("distortion", "distortion_radius_mm", "principal_points", "extrinsics", "rolls_deg")
+HEADER = ("format", "version", "description")
+KNOWN = HEADER + REQUIRED + OPTIONAL
+MIN_CAMS = 2  # the tile processor correlates pairs
+
+
+class RigFileError(ValueError):
+    """A rig file (or rig description) that is not valid; the message names the field."""
+
+
+def _fail(source: str, field: str, expected: str, got) -> RigFileError:
+    return RigFileError(f"{source}: {field}: expected {expected}, got {got!r}")
+
+
+def _number(value, source: str, field: str) -> float:
+    """A finite real number (not a bool) as float."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise _fail(source, field, "a number", value)
+    out = float(value)
+    if not math.isfinite(out):
+        raise _fail(source, field, "a finite number", value)
+    return out
+
+
+def _length(value, source: str, field: str) -> float:
+    out = _number(value, source, field)
+    if out <= 0:
+        raise _fail(source, field, "a positive length in mm", value)
+    return out
+
+
+def _size(value, source: str, field: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value <= 0:
+        raise _fail(source, field, "a positive integer number of pixels", value)
+    return int(value)
+
+
+def _list(value, source: str, field: str, length: int | None, what: str) -> list:
+    if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__len__") or not hasattr(value, "__iter__"):
+        raise _fail(source, field, f"a list of {what}", value)
+    items = list(value)
+    if length is not None and len(items) != length:
+        raise RigFileError(f"{source}: {field}: expected {length} {what}, got {len(items)}")
+    return items
+
+
+def _vector(value, source: str, field: str, length: int, what: str) -> tuple:
+    items = _list(value, source, field, length, what)
+    return tuple(_number(v, source, f"{field}[{i}]") for i, v in enumerate(items))
+
+
+def _points(value, source: str, field: str, rows: int | None) -> tuple:
+    """``rows`` (or >= MIN_CAMS when None) pairs (x, y) of finite numbers."""
+    items = _list(value, source, field, rows, "(x, y) rows, one per camera")
+    if rows is None and len(items) < MIN_CAMS:
+        raise RigFileError(f"{source}: {field}: expected at least {MIN_CAMS} cameras (x, y), got {len(items)}")
+    return tuple(_vector(row, source, f"{field}[{i}]", 2, "numbers (x, y)") for i, row in enumerate(items))
+
+
+def rig_from_dict(data, source: str = "rig") -> Rig:
+    """A ``Rig`` from a parsed rig file (rig_file.md §2, §3); ``source`` (e.g. the file name) starts messages.
+
+    Raises:
+        RigFileError: not a table, a key unknown or missing, or a value of the wrong type, length or sign.
+    """
+    if not isinstance(data, dict):
+        raise RigFileError(f"{source}: expected a table (JSON object) of rig fields, got {type(data).__name__}")
+    unknown = [k for k in data if k not in KNOWN]
+    if unknown:
+        raise RigFileError(f"{source}: unknown keys {unknown}; expected some of {list(KNOWN)}")
+    missing = [k for k in REQUIRED if k not in data]
+    if missing:
+        raise RigFileError(f"{source}: missing keys {missing}; required: {list(REQUIRED)}")
+    if "format" in data and data["format"] != FORMAT:
+        raise _fail(source, "format", repr(FORMAT), data["format"])
+    if "version" in data and (isinstance(data["version"], bool) or data["version"] not in range(1, VERSION + 1)):
+        raise _fail(source, "version", f"an integer 1..{VERSION}", data["version"])
+    if "description" in data and not isinstance(data["description"], str):
+        raise _fail(source, "description", "a string", data["description"])
+    kw = {"width": _size(data["width"], source, "width"), "height": _size(data["height"], source, "height")}
+    for name in ("pixel_size_mm", "focal_mm", "baseline_mm"):
+        kw[name] = _length(data[name], source, name)
+    kw["offsets"] = _points(data["offsets"], source, "offsets", None)
+    cams = len(kw["offsets"])
+    radius = data.get("distortion_radius_mm")
+    kw["distortion_radius_mm"] = (kw["width"] * kw["pixel_size_mm"] / 2.0 if radius is None
+                                  else _length(radius, source, "distortion_radius_mm"))
+    terms = ((DISTORTION_TERMS, "distortion", "terms (C, B, A, A5, A6, A7, A8)"),
+             (EXTRINSIC_TERMS, "extrinsics", "terms (tilt0..2, az0..2, roll0..3, zoom0..2)"))
+    for count, name, what in terms:
+        value = data.get(name)
+        kw[name] = (0.0,) * count if value is None else _vector(value, source, name, count, what)
+    if data.get("principal_points") is not None:
+        kw["principal_points"] = _points(data["principal_points"], source, "principal_points", cams)
+    if data.get("rolls_deg") is not None:
+        kw["rolls_deg"] = _vector(data["rolls_deg"], source, "rolls_deg", cams, "angles (degrees), one per camera")
+    try:
+        return Rig(**kw)
+    except ValueError as exc:  # Rig's own checks (none should remain after the ones above)
+        raise RigFileError(f"{source}: {exc}") from exc
+
+
+def _fields(rig: Rig) -> dict:
+    data = {
+        "width": rig.width, "height": rig.height, "pixel_size_mm": rig.pixel_size_mm, "focal_mm": rig.focal_mm,
+        "baseline_mm": rig.baseline_mm, "offsets": [list(r) for r in rig.offsets],
+        "distortion": list(rig.distortion), "distortion_radius_mm": rig.distortion_radius_mm,
+        "extrinsics": list(rig.extrinsics),
+    }
+    if rig.principal_points is not None:
+        data["principal_points"] = rig.principal().tolist()  # Rig also takes them flat
+    if rig.rolls_deg is not None:
+        data["rolls_deg"] = list(rig.rolls_deg)
+    return data
+
+
+def rig_to_dict(rig: Rig, description: str | None = None) -> dict:
+    """The file form of ``rig``: header, then its fields (``principal_points`` / ``rolls_deg`` only when set).
+    The rig is checked by ``rig_from_dict`` first (NaN, lengths, ...), so what is written reads back."""
+    checked = rig_from_dict(_fields(rig), "rig")  # also turns NumPy numbers into plain ints and floats
+    header = {"format": FORMAT, "version": VERSION}
+    if description is not None:
+        if not isinstance(description, str):
+            raise _fail("rig", "description", "a string", description)
+        header["description"] = description
+    return {**header, **_fields(checked)}
+
+
+def _suffix(path: Path, arg: str) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise RigFileError(f"{arg}: expected a {' or '.join(SUFFIXES)} rig file, got {path.name!r}")
+    return suffix
+
+
+def read_rig(path) -> Rig:
+    """Read a rig file (``.json`` or ``.toml``, rig_file.md §1).
+
+    Raises:
+        FileNotFoundError: no such file.
+        RigFileError: another suffix, not parseable, or a field that ``rig_from_dict`` refuses.
+    """
+    path = Path(path)
+    suffix = _suffix(path, "path")
+    if not path.is_file():
+        raise FileNotFoundError(f"rig file not found: {path}")
+    try:
+        text = path.read_text(encoding="utf-8")
+        data = json.loads(text) if suffix == ".json" else tomllib.loads(text)
+    except UnicodeDecodeError as exc:
+        raise RigFileError(f"{path}: not a text file ({exc})") from exc
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise RigFileError(f"{path}: not valid {suffix[1:].upper()} ({exc})") from exc
+    return rig_from_dict(data, str(path))
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, str):  # a TOML basic string: JSON's escapes, plus DEL (TOML wants it escaped)
+        return json.dumps(value, ensure_ascii=False).replace("\x7f", "\\u007f")
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return repr(value)  # finite (checked); repr round-trips and is valid TOML (1e-05, 258.0)
+    return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+
+
+def _json(data: dict) -> str:
+    """One key a line, each value on its line (lists of rows too): short enough to edit by hand."""
+    lines = [f"  {json.dumps(key)}: {json.dumps(value, ensure_ascii=False)}" for key, value in data.items()]
+    return "{\n" + ",\n".join(lines) + "\n}\n"
+
+
+def _toml(data: dict) -> str:
+    return "".join(f"{key} = {_toml_value(value)}\n" for key, value in data.items())
+
+
+def write_rig(rig: Rig, path, *, description: str | None = None) -> Path:
+    """Write ``rig`` to ``path`` as JSON (``.json``) or TOML (``.toml``); returns the path.
+
+    Raises:
+        RigFileError: another suffix, or a rig field that would not read back (e.g. NaN).
+    """
+    path = Path(path)
+    suffix = _suffix(path, "path")
+    data = rig_to_dict(rig, description)
+    text = _json(data) if suffix == ".json" else _toml(data)
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def examples() -> dict[str, Path]:
+    """The shipped example rigs, name -> file (``tpnet_gpu/rigs/NAME.json``)."""
+    return {p.stem: p for p in sorted(EXAMPLES_DIR.glob("*.json"))}
+
+
+def resolve(spec) -> Path:
+    """A rig file path, or the name of a shipped example (``quad``, ``binocular``, ...; a file wins)."""
+    path = Path(spec)
+    if path.is_file():
+        return path
+    found = examples().get(str(spec))
+    if found is not None:
+        return found
+    raise FileNotFoundError(f"rig file not found: {spec} (nor a shipped example: {', '.join(examples())})")
+
+
+def load(spec) -> Rig:
+    """``read_rig(resolve(spec))``: a rig file or a shipped example's name."""
+    return read_rig(resolve(spec))
