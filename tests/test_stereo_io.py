@@ -108,19 +108,10 @@ class EnginePipeline:
 
     calls = []
 
-    def __init__(self, height, width, *, cfa="GRBG", rig=None, min_disparity=0.0, max_disparity=64.0,
+    def __init__(self, height, width, *, cfa="GRBG", rig=None, min_disparity=None, max_disparity=None,
                  weights=None, device=None, backend=None):
         self.calls.append(dict(height=height, width=width, cfa=cfa, rig=rig, min_disparity=min_disparity,
                                max_disparity=max_disparity, device=device, backend=backend))
-
-
-class TodaysPipeline:
-    """Stand-in with today's signature (no rig, no disparity range)."""
-
-    calls = []
-
-    def __init__(self, height, width, *, cfa="GRBG", weights=None, device=None, config=None, backend=None):
-        self.calls.append(dict(height=height, width=width, cfa=cfa, device=device, backend=backend))
 
 
 @pytest.fixture
@@ -142,19 +133,6 @@ def test_make_pipeline_with_the_engine(pipeline):
     assert calls == [dict(height=24, width=40, cfa=None, rig=rig, min_disparity=-1.0, max_disparity=12.5,
                           device="cpu", backend="warp")]
     make_pipeline(32, 48, cfa="GRBG", rig=Rig(), device=None, backend=None)
-    assert calls[1]["max_disparity"] == 64.0  # not given: the engine's own default, not None
+    assert calls[1]["max_disparity"] is None  # not given: Pipeline takes None as the engine's default (the rig's)
 
 
-def test_make_pipeline_before_the_engine(pipeline):
-    calls = pipeline(TodaysPipeline)
-    make_pipeline(32, 48, cfa="GRBG", rig=Rig(width=48, height=32), device="cpu", backend=None)
-    assert calls == [dict(height=32, width=48, cfa="GRBG", device="cpu", backend=None)]
-    pair = rigfile.load("binocular")
-    for kw in (dict(cfa=None, rig=pair), dict(cfa="GRBG", rig=pair), dict(cfa=None, rig=Rig()),
-               dict(cfa="GRBG", rig=Rig().referenced_to(0))):
-        with pytest.raises(ValueError, match=r"needs the disparity engine \(issue 13\)"):
-            make_pipeline(32, 48, **kw)
-    with pytest.raises(ValueError, match=r"a disparity range needs the disparity engine \(issue 13\)"):
-        make_pipeline(32, 48, cfa="GRBG", rig=Rig(), max_disparity=20.0)
-    assert len(calls) == 1
-    assert np.array_equal(Rig().offsets_array(), tables.QUAD_OFFSETS)

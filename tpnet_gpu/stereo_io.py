@@ -11,7 +11,6 @@ outputs back to the original size.
 
 from __future__ import annotations
 
-import inspect
 import json
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -28,7 +27,6 @@ LUMA_WEIGHTS = (0.299, 0.587, 0.114)  # R, G, B: ITU-R BT.601 luma, as Pillow's 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".pgm", ".pnm", ".webp")
 TIFF_SUFFIXES = (".tif", ".tiff")  # an ordinary image, or a Bayer mosaic when a CFA is given
 PAIR_RIG = "binocular"  # shipped rig of a stereo pair given without --rig
-ENGINE_PARAMETERS = ("rig", "min_disparity", "max_disparity")  # of the disparity engine's Pipeline (issue 13)
 
 
 def padded_side(n: int) -> int:
@@ -285,31 +283,9 @@ def load_inputs(paths, *, rig=None, cfa: str | None = None, colour: str = "luma"
 
 def make_pipeline(height: int, width: int, *, cfa: str | None, rig: Rig, min_disparity: float = 0.0,
                   max_disparity: float | None = None, device: str | None = None, backend: str | None = None):
-    """The pipeline for frames of ``height`` x ``width`` from ``rig``: the one place that knows its signature.
-
-    With the disparity engine (issue 13; ``Pipeline`` takes ``rig``, ``min_disparity`` and ``max_disparity``):
-    ``Pipeline(height, width, cfa=cfa, rig=rig, min_disparity=..., max_disparity=..., device=..., backend=...)``,
-    ``max_disparity`` left out when None (the engine's default). Before it: today's
-    ``Pipeline(height, width, cfa=cfa, device=..., backend=...)``, which takes a Bayer quad (the quad's camera
-    layout; it assumes the ideal geometry, as it always has) and its built-in sweep only.
-
-    Raises:
-        ValueError: before the engine, any other rig or colours, or a disparity range ("needs the disparity
-            engine (issue 13)").
-    """
+    """The pipeline for frames of ``height`` x ``width`` from ``rig`` (any camera count; ``max_disparity`` None:
+    the engine's default from the rig)."""
     from tpnet_gpu.pipeline import Pipeline  # noqa: PLC0415 - torch, Warp and the model on use
 
-    if all(name in inspect.signature(Pipeline).parameters for name in ENGINE_PARAMETERS):
-        extra = {} if max_disparity is None else {"max_disparity": max_disparity}
-        return Pipeline(height, width, cfa=cfa, rig=rig, min_disparity=min_disparity, device=device,
-                        backend=backend, **extra)
-    quad = rig.cams == 4 and np.array_equal(rig.offsets_array(), np.asarray(tables.QUAD_OFFSETS))
-    if not quad or cfa is None:
-        layout = "" if quad else f" at offsets {rig.offsets_array().tolist()}"
-        kind = "mono images" if cfa is None else f"raw {cfa} mosaics"
-        raise ValueError(f"inputs: {rig.cams} cameras{layout} of {kind}: this needs the disparity engine "
-                         "(issue 13); today's pipeline takes a raw quad only")
-    if max_disparity is not None or min_disparity != 0:
-        raise ValueError(f"min_disparity={min_disparity:g}, max_disparity={max_disparity}: a disparity range needs "
-                         "the disparity engine (issue 13); today's pipeline sweeps its built-in targets")
-    return Pipeline(height, width, cfa=cfa, device=device, backend=backend)
+    return Pipeline(height, width, cfa=cfa, rig=rig, min_disparity=min_disparity, max_disparity=max_disparity,
+                    device=device, backend=backend)
