@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from tpnet_gpu import dataset
-from tpnet_gpu.baseline.estimate import BASELINE_CORRELATION
 from tpnet_gpu.dataset import DatasetSpec
 
 SPEC = DatasetSpec(scenes=3, width=64, height=48, test_fraction=0.34, seed=4, supersample=1)
@@ -48,7 +47,10 @@ def test_chunk_contents(built):
 
 def test_build_resumes_and_rebuilds_identically(built, tmp_path):
     first = dataset.load(built, "test")[0]
-    again = dataset.build_scene(int(first["scene"]), SPEC, _processor(), _processor(BASELINE_CORRELATION))
+    from tpnet_gpu.disparity import DisparityEngine
+
+    engine = DisparityEngine(SPEC.height, SPEC.width, device="cpu")
+    again = dataset.build_scene(int(first["scene"]), SPEC, engine, engine.tp)
     np.testing.assert_array_equal(again["gt_disparity"], first["gt_disparity"])
     for variant in SPEC.variants():  # deterministic per seed; the layers are the processor's at the targets
         np.testing.assert_array_equal(again[f"layers_{variant}"], first[f"layers_{variant}"])
@@ -64,15 +66,8 @@ def test_old_data_set_version_is_refused(built, tmp_path):
     manifest = json.loads((built / "manifest.json").read_text())
     manifest["version"] = 1
     (tmp_path / "manifest.json").write_text(json.dumps(manifest))
-    with pytest.raises(ValueError, match="expected data set version 2, got 1"):
+    with pytest.raises(ValueError, match="expected data set version 3, got 1"):
         dataset.load(tmp_path, "train")
-
-
-def _processor(config=None):
-    from tpnet_gpu.processor import TileProcessor
-
-    config = config or SPEC.correlation()
-    return TileProcessor(SPEC.height, SPEC.width, config=config, device="cpu")
 
 
 def test_bad_split_and_missing_manifest(tmp_path):

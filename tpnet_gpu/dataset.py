@@ -2,12 +2,13 @@
 
 Per scene (one compressed NPZ chunk) and per target variant, every tile's 4 network layers ``(4, 9, 9)``
 (float16), its target disparity, and the ground truth (disparity at the tile centre, confidence, spread).
-Variants (network.md §6): ``heuristic`` - targets from the hand-crafted baseline (sweep + refinement; tiles
-it cannot measure get ground truth + a random offset); ``random`` - ground truth + a uniform offset in
+Variants (network.md §6): ``heuristic`` - targets from the disparity engine (``tpnet_gpu.disparity``, as the
+pipeline runs it; tiles it cannot measure get ground truth + a random offset); ``random`` - ground truth + a uniform offset in
 +-``random_offset`` px; ``near0``, ``near1``, ... (``near_draws`` of them) - ground truth + an offset of
 random sign and log-uniform size in ``near_offset`` px: the targets a second network pass starts from, which
 teach the precision near the answer. Scenes are split into train and test by scene. ``manifest.json`` lists
-the chunks.
+the chunks. Frames are scaled as the engine scales them (``DisparityEngine.normalise``) before the layers are
+made, so training sees what the pipeline feeds the network.
 """
 
 from __future__ import annotations
@@ -18,13 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from tpnet_gpu.baseline.estimate import BaselineParams, estimate, processor_correlator
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.config import BASELINE_CORRELATION, DatasetSpec  # noqa: F401 - DatasetSpec re-exported
+from tpnet_gpu.config import DatasetSpec  # noqa: F401 - DatasetSpec re-exported
 from tpnet_gpu.scenes import Sensor, random_scene, render
 
 FORMAT = "tpnet-dataset"
-VERSION = 2
+VERSION = 3  # 3: heuristic targets from the disparity engine, frames scaled as the engine scales them
 
 
 def _layers(processor, frames, target) -> np.ndarray:
@@ -33,10 +33,10 @@ def _layers(processor, frames, target) -> np.ndarray:
     return layers.reshape(target.shape + layers.shape[1:]).astype(np.float16)
 
 
-def build_scene(index: int, spec: DatasetSpec, processor, baseline_processor,
-                baseline: BaselineParams = BaselineParams()) -> dict:
-    """Render scene ``index`` and return its arrays (see the module docstring). ``processor`` makes the
-    network layers; ``baseline_processor`` (correlating as the baseline does) makes the heuristic targets."""
+def build_scene(index: int, spec: DatasetSpec, engine, processor) -> dict:
+    """Render scene ``index`` and return its arrays (see the module docstring). ``engine`` (a
+    ``DisparityEngine`` of the spec's size) makes the heuristic targets; ``processor`` (correlating as
+    ``spec.correlation()``; may be the engine's own) makes the network layers."""
     rig = Rig(width=spec.width, height=spec.height)
     rng = np.random.default_rng([spec.seed, index])
     rendered = render(random_scene(rig, rng), rig, sensor=Sensor(), supersample=spec.supersample,
@@ -44,7 +44,8 @@ def build_scene(index: int, spec: DatasetSpec, processor, baseline_processor,
     frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
     gt = rendered.tile_disparity.astype(np.float64)
     shape = gt.shape
-    heuristic = estimate(processor_correlator(baseline_processor, frames), shape, baseline).disparity
+    heuristic = engine.run(frames).disparity.cpu().numpy().astype(np.float64)
+    frames = engine.normalise(frames)
     fallback = gt + rng.uniform(-spec.random_offset, spec.random_offset, shape)
     heuristic = np.where(np.isfinite(heuristic), heuristic, fallback)
     targets = {"heuristic": heuristic, "random": gt + rng.uniform(-spec.random_offset, spec.random_offset, shape)}
@@ -65,20 +66,21 @@ def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = Non
     present are kept."""
     from tqdm import tqdm  # noqa: PLC0415
 
-    from tpnet_gpu.processor import TileProcessor  # noqa: PLC0415 - Warp starts on use
+    from tpnet_gpu.disparity import DisparityEngine  # noqa: PLC0415 - Warp starts on use
+    from tpnet_gpu.processor import TileProcessor  # noqa: PLC0415
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    processor = TileProcessor(spec.height, spec.width, config=spec.correlation(), device=device)
-    baseline_processor = (processor if spec.correlation() == BASELINE_CORRELATION else
-                          TileProcessor(spec.height, spec.width, config=BASELINE_CORRELATION, device=device))
+    engine = DisparityEngine(spec.height, spec.width, device=device)
+    processor = (engine.tp if spec.correlation().resolved(engine.tp.colours) == engine.tp.config else
+                 TileProcessor(spec.height, spec.width, config=spec.correlation(), device=device))
     labels = spec.split()
     chunks = []
     for index in tqdm(range(spec.scenes), desc="scenes", disable=not progress):
         path = folder / f"scene_{index:04d}.npz"
         if not path.exists():
             tmp = path.with_suffix(".tmp.npz")
-            np.savez_compressed(tmp, **build_scene(index, spec, processor, baseline_processor))
+            np.savez_compressed(tmp, **build_scene(index, spec, engine, processor))
             tmp.replace(path)
         chunks.append({"file": path.name, "split": labels[index], "scene": index})
     manifest = {"format": FORMAT, "version": VERSION, "spec": asdict(spec), "variants": list(spec.variants()),
