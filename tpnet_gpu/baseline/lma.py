@@ -23,7 +23,7 @@ import numpy as np
 
 from tpnet_gpu.baseline.lma_samples import (  # noqa: F401 - LmaParams, combine_groups re-exported
     A_DIAG, A_ORTHO, CORR_SIZE, GROUP_SCALES, NUM_PARS, SINGULAR_RCOND, WM, WXY, X0, LmaParams, _samples,
-    combine_groups,
+    combine_groups, peak_variance, widen,
 )
 
 
@@ -90,6 +90,13 @@ def _fit_block(ortho, diag, x_start, n_ortho, n_diag, params: LmaParams):
     tiles = ortho.shape[0]
     start_ok = np.isfinite(x_start)
     ixc = np.floor(np.clip(np.where(start_ok, x_start, 0.0), -64, 64) + 0.5).astype(np.int64)  # Java round
+    if params.peak_sigma_min > 0:  # widen peaks narrower than the model can follow (C.4 "Peak widening")
+        variance = peak_variance(ortho, diag, ixc, params)
+        narrow = start_ok & (variance > 0)
+        if narrow.any():
+            ortho, diag = ortho.copy(), diag.copy()
+            ortho[narrow] = widen(ortho[narrow], variance[narrow])
+            diag[narrow] = widen(diag[narrow], variance[narrow])
     values, raw_w, x, y, group_of = _samples(ortho, diag, ixc, n_ortho, n_diag, params)
     group_of = np.broadcast_to(group_of, raw_w.shape)
     group_sum = np.stack([np.sum(raw_w * (group_of == g), axis=1) for g in (0, 1)], axis=1)  # (T, 2)
@@ -227,6 +234,11 @@ def fit_peaks(ortho, diag, x_start, *, n_ortho=4, n_diag=2, params: LmaParams = 
     sums NaN weights into gamma); a tile whose start already fits exactly (cost 0) counts as a success; a
     step matrix is singular when its unit-diagonal scaled reciprocal condition is below 1e-13 (Jama only
     fails on exact singularity), which ends that tile's fit like the spec's singular matrix.
+    Addition (C.4 "Peak widening", issue 13): a tile whose peak measures a Gaussian-equivalent sigma below
+    ``params.peak_sigma_min`` has both groups low-passed to ``params.peak_sigma`` before sampling, and its
+    samples, fit and strength come from the widened groups (the paraboloid pulls narrower peaks, e.g. mono
+    phase correlations, to whole lags); other tiles are fitted as without it, and
+    ``LmaParams(peak_sigma_min=0)`` is the original fit.
     """
     if not isinstance(params, LmaParams):
         raise TypeError(f"params: expected LmaParams, got {type(params).__name__}")

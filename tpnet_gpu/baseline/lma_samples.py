@@ -22,6 +22,8 @@ NUM_PARS = 5  # x0, Wm, Wxy, A_ortho, A_diag (Wyd is fixed at 0, lma_adjust_wy =
 X0, WM, WXY, A_ORTHO, A_DIAG = range(NUM_PARS)
 GROUP_SCALES = (1.0, np.sqrt(2.0))  # s of the model per group: ortho, diagonal
 SINGULAR_RCOND = 1e-13  # reciprocal condition (unit-diagonal scaled) below which a step matrix is singular
+WIDTH_FLOOR = 0.02  # floor of the neighbour / centre ratios that measure a peak's width (sigma >= 0.36 px)
+WIDEN_RADIUS = 4  # half-size of the widening low-pass kernel [px] (3.3 sigma at the default peak_sigma 1.2)
 
 
 @dataclass(frozen=True)
@@ -40,6 +42,10 @@ class LmaParams:
     cnvx_weight: float = 0.5  # cnvx_weight: mask weight of selected non-convex cells (and the 3x3 fill)
     vasw_pwr: float = 2.0  # ortho_vasw_pwr: sample weight ~ |value| ** vasw_pwr
     hwnd: int = 4  # cnvx_hwnd_size: half-size of the sample box [px], 9x9 for 4
+    # This project's addition (C.4 "Peak widening"): peaks of a Gaussian-equivalent sigma [px] below
+    # peak_sigma_min are low-passed to peak_sigma before sampling; peak_sigma_min 0 turns it off (the original).
+    peak_sigma: float = 1.2
+    peak_sigma_min: float = 1.1
 
     def __post_init__(self):
         for f in fields(self):
@@ -54,9 +60,12 @@ class LmaParams:
         for name in ("half_width", "lambda_initial", "lambda_good", "lambda_bad", "lambda_max"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"LmaParams.{name}: expected > 0, got {getattr(self, name)!r}")
-        for name in ("cost_wy", "cost_wxy", "rms_diff", "cnvx_weight", "vasw_pwr"):
+        for name in ("cost_wy", "cost_wxy", "rms_diff", "cnvx_weight", "vasw_pwr", "peak_sigma", "peak_sigma_min"):
             if getattr(self, name) < 0:
                 raise ValueError(f"LmaParams.{name}: expected >= 0, got {getattr(self, name)!r}")
+        if self.peak_sigma_min > self.peak_sigma:
+            raise ValueError(f"LmaParams.peak_sigma_min: expected <= peak_sigma {self.peak_sigma!r}, "
+                             f"got {self.peak_sigma_min!r}")
 
 
 def combine_groups(corr, pairs_mask=None):
@@ -183,6 +192,59 @@ def _gather_box(group, row0, col0, hwnd: int):
     t = np.arange(group.shape[0])[:, None, None]
     box = group[t, np.clip(rows, 0, CORR_SIZE - 1), np.clip(cols, 0, CORR_SIZE - 1)]
     return np.where(valid, box, np.nan), valid
+
+
+def peak_variance(ortho, diag, ixc, params: LmaParams):
+    """Low-pass variance ``(T,)`` [px^2] that widens each tile's too-narrow peak (C.4 "Peak widening").
+
+    Per group the width is measured at the largest of the three cells on its axis around the start cell
+    (ortho (ixc + k, 0), diagonal (ixc + k, ixc + k), k = -1..1; so within about half a pixel of the peak),
+    across the axis, where the cells are symmetric about the peak: ortho (0, -+1), diagonal the anti-diagonal
+    cells (-+1, +-1) at distance sqrt 2. The log curvature c = -ln(v- v+ / v0^2) / d^2 (d^2 = 1 or 2, each
+    ratio floored at ``WIDTH_FLOOR``, c >= 0) is exactly 1 / sigma^2 for a Gaussian peak. The mean c over the
+    usable groups (centre > 0, neighbours finite) gives sigma_p^2 = 1 / c; where sigma_p < ``peak_sigma_min``
+    the variance is peak_sigma^2 - sigma_p^2, else 0 (also where nothing is usable).
+    """
+    tiles = ixc.shape[0]
+    t = np.arange(tiles)[:, None]
+    curv_sum = np.zeros(tiles)
+    count = np.zeros(tiles)
+    for group, diagonal in ((ortho, False), (diag, True)):
+        cells = ixc[:, None] + CORR_CENTRE + np.arange(-1, 2)
+        inside = (cells >= 0) & (cells < CORR_SIZE)
+        clipped = np.clip(cells, 0, CORR_SIZE - 1)
+        on_axis = group[t, clipped if diagonal else CORR_CENTRE, clipped]
+        on_axis = np.where(inside & np.isfinite(on_axis), on_axis, -np.inf)
+        col = cells[t[:, 0], np.argmax(on_axis, axis=1)]  # no finite cell: a NaN box below, not usable
+        box, _ = _gather_box(group, col if diagonal else np.full_like(col, CORR_CENTRE), col, 1)
+        v0 = box[:, 1, 1]
+        minus, plus, dist2 = (box[:, 2, 0], box[:, 0, 2], 2.0) if diagonal else (box[:, 0, 1], box[:, 2, 1], 1.0)
+        usable = np.isfinite(v0) & (v0 > 0) & np.isfinite(minus) & np.isfinite(plus)
+        v0 = np.where(usable, v0, 1.0)
+        floor = WIDTH_FLOOR * v0
+        ratio = np.where(usable, np.maximum(minus, floor) * np.maximum(plus, floor) / v0**2, 1.0)
+        curv_sum += np.where(usable, np.maximum(-np.log(ratio), 0.0) / dist2, 0.0)
+        count += usable
+    curv = curv_sum / np.maximum(count, 1.0)
+    narrow = curv * params.peak_sigma_min**2 > 1.0  # sigma_p < peak_sigma_min (curv 0: infinitely wide)
+    sigma2 = 1.0 / np.where(narrow, curv, 1.0)
+    return np.where(narrow, np.clip(params.peak_sigma**2 - sigma2, 0.0, None), 0.0)
+
+
+def widen(group, variance):
+    """Separable Gaussian low-pass of ``group (T, 15, 15)`` with per-tile ``variance (T,)`` [px^2] (> 0).
+
+    Taps up to ``WIDEN_RADIUS``, normalised over the finite cells (cells outside the tile and NaN cells do not
+    count); NaN cells stay NaN. As matrix products: (K v K) / (K m K), K the tile's symmetric band matrix.
+    """
+    lag = np.arange(CORR_SIZE)
+    diff = (lag[:, None] - lag[None, :]).astype(np.float64)
+    var = np.asarray(variance, dtype=np.float64)[:, None, None]
+    kernel = np.where(np.abs(diff) <= WIDEN_RADIUS, np.exp(-(diff**2) / (2.0 * var)), 0.0)  # (T, 15, 15)
+    finite = np.isfinite(group)
+    num = kernel @ np.where(finite, group, 0.0) @ kernel
+    den = kernel @ finite.astype(np.float64) @ kernel
+    return np.where(finite & (den > 0), num / np.where(den > 0, den, 1.0), np.nan)
 
 
 def _samples(ortho, diag, ixc, n_ortho, n_diag, params: LmaParams):
