@@ -172,7 +172,9 @@ class EngineConfig:
     Disparities in px of the full frame. ``d_min``/``d_max``: the range searched (None for d_max: from the rig and
     ``nearest_m``). Coarse stage: frames binned 2x2 (mono), targets every ``coarse_step`` coarse px, each pass's
     correlations used within +-``reach`` px of its target. Full resolution: one pass at the coarse answer, read
-    within +-``reach``. Aggregation (SGM over the tile grid) penalties ``p1`` (one-bin step), ``p2`` (any jump),
+    within +-``reach``; tiles whose choice is doubtful there (aggregated-cost margin < ``verify_margin`` with a
+    correlation >= ``verify_strength`` at the choice) are swept over the whole range at full resolution (only
+    those tiles) and chosen again. Aggregation (SGM over the tile grid) penalties ``p1`` (one-bin step), ``p2`` (any jump),
     on costs 1 - correlation, bins of ``bin_step`` px. Refinement: LMA (quad) or the pairs' combined peak
     (any rig) re-correlation, at most ``refine_passes`` passes over the tiles that still move more than
     ``tolerance`` px; a measurement counts where its strength >= ``min_strength`` and |residual| <= ``trust``.
@@ -186,13 +188,15 @@ class EngineConfig:
     coarse_step: float = 10.0
     reach: float = 6.0
     bin_step: float = 0.5
-    p1: float = 0.05
-    p2: float = 0.3
+    p1: float = 0.08
+    p2: float = 0.45
     refine_passes: int = 4
     tolerance: float = 0.03
     min_strength: float = 0.1
     trust: float = 4.0
     measure: str = "axis"
+    verify_margin: float = 1.0
+    verify_strength: float = 0.1
 
     def __post_init__(self):
         if self.measure not in MEASURES:
@@ -201,7 +205,7 @@ class EngineConfig:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
                 raise ValueError(f"EngineConfig.{name}: expected a finite number > 0, got {value!r}")
-        for name in ("p1", "p2", "min_strength"):
+        for name in ("p1", "p2", "min_strength", "verify_margin", "verify_strength"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0):
                 raise ValueError(f"EngineConfig.{name}: expected a finite number >= 0, got {value!r}")

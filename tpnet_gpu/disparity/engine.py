@@ -87,7 +87,7 @@ class DisparityEngine:
         self.grid = (self.tp.tiles_y, self.tp.tiles_x)
         self.sampler = AxisSampler(offsets, pairs, self.device)
         self.offsets = torch.arange(-7.0, 7.0 + 1e-6, OFFSETS_STEP, device=self.device)
-        self.measurer = Measurer(self.tp.pairs, self.sampler, config)
+        self.measurer = Measurer(self.tp.pairs, self.sampler, config, widen=cfa is None)
         self.calibrated = not self.rig.is_ideal()
         coarse_ok = height % (8 * BIN) == 0 and width % (8 * BIN) == 0 and min(height, width) >= 16 * BIN
         self.coarse = None
@@ -98,12 +98,15 @@ class DisparityEngine:
                                         device=str(self.tp.device), backend=self.tp.backend)
 
     # --- first stage ---------------------------------------------------------------------------------------
-    def _sweep(self, tp: TileProcessor, targets, volume: CostVolume, grid) -> None:
-        """Measure the loaded frame at each target (uniform numbers or ``(ty, tx)`` tensors) into ``volume``."""
+    def _sweep(self, tp: TileProcessor, targets, volume: CostVolume, grid, active=None) -> None:
+        """Measure the loaded frame at each target (uniform numbers or ``(ty, tx)`` tensors) into ``volume``
+        (only the ``active`` tiles, when a mask is given)."""
         for target in targets:
             t = target if isinstance(target, torch.Tensor) else torch.full(grid, float(target), device=self.device)
-            corr = self.measure_at(tp, t).corr
+            corr = self.measure_at(tp, t, active=active).corr
             combined = combine_pairs(self.sampler.sample(corr, self.offsets))
+            if active is not None:
+                combined = torch.where(active.reshape(-1, 1), combined, torch.full_like(combined, float("nan")))
             volume.add(t, self.offsets, combined, self.config.reach)
 
     def set_targets(self, tp: TileProcessor, target: torch.Tensor, active=None) -> None:
@@ -149,6 +152,16 @@ class DisparityEngine:
         self._sweep(self.tp, starts, volume, self.grid)
         passes += len(starts)
         found, margin = self._choose(volume)
+        if self.coarse is not None:  # tiles the coarse answer may have misled: swept over the whole range
+            picked = volume.at(found)
+            # a tile with a peak but a close rival (textureless tiles have no peak anywhere: not worth a sweep)
+            doubtful = (margin < cfg.verify_margin) & (picked >= cfg.verify_strength)
+            share = float(doubtful.float().mean())
+            if share > 0:
+                sweep = np.arange(cfg.d_min + cfg.reach - 2.0, self.d_max + cfg.reach, 2 * cfg.reach - 2.0)
+                self._sweep(self.tp, sweep, volume, self.grid, active=doubtful)
+                passes += len(sweep) * share
+                found, margin = self._choose(volume)
         return found, margin, passes
 
     # --- refinement ------------------------------------------------------------------------------------------

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from tpnet_gpu import tables
 from tpnet_gpu.baseline.estimate import BaselineParams, measure as lma_measure
@@ -20,10 +21,31 @@ from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs
 PEAK_OFFSETS = 0.25  # px between the offsets the generic peak is read at
 
 
-class Measurer:
-    """``measure(corr (T, P, 15, 15), active (T,)) -> (residual (T,), strength (T,))``, NaN / 0 where none."""
+WIDEN_SIGMA = 0.9  # px: Gaussian blur of mono correlations before the peak is located
 
-    def __init__(self, pairs, sampler: AxisSampler, config: EngineConfig):
+
+def gaussian_blur(corr: torch.Tensor, sigma: float) -> torch.Tensor:
+    """Separable Gaussian blur (std ``sigma`` px, 7 taps, edges replicated) of correlations ``(T, P, 15, 15)``."""
+    taps = torch.arange(-3.0, 4.0, device=corr.device)
+    kernel = torch.exp(-(taps**2) / (2 * sigma**2))
+    kernel = kernel / kernel.sum()
+    tiles, pairs, side = corr.shape[0], corr.shape[1], corr.shape[-1]
+    x = corr.reshape(tiles * pairs, 1, side, side)
+    x = F.conv2d(F.pad(x, (3, 3, 0, 0), mode="replicate"), kernel.view(1, 1, 1, 7))
+    x = F.conv2d(F.pad(x, (0, 0, 3, 3), mode="replicate"), kernel.view(1, 1, 7, 1))
+    return x.reshape(corr.shape)
+
+
+class Measurer:
+    """``measure(corr (T, P, 15, 15), active (T,)) -> (residual (T,), strength (T,))``, NaN / 0 where none.
+
+    ``widen``: locate peaks on Gaussian-blurred correlations (mono: the phase-correlation peak of a mono tile is
+    a near-delta, about 0.4 px wide, whose sub-pixel position a parabola through interpolated samples pulls
+    toward whole lags - median error 0.04 px at fractional shifts of an 8-bit photograph pair, 0.011 blurred);
+    the strength is still read on the unblurred correlations, so the thresholds keep their meaning."""
+
+    def __init__(self, pairs, sampler: AxisSampler, config: EngineConfig, widen: bool = False):
+        self.widen = widen
         self.lma = tuple(pairs) == tables.QUAD_PAIRS and config.measure == "lma"
         self.sampler = sampler
         self.params = BaselineParams(min_strength=config.min_strength, trust=config.trust, tolerance=config.tolerance)
@@ -52,6 +74,9 @@ class Measurer:
     def _peak(self, corr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Whole-pixel peak of the combined correlation (bilinear, cheap), then a parabola through bicubic samples
         at quarter pixels around it (bilinear samples of a sharp peak pull the parabola toward whole lags)."""
+        raw = corr
+        if self.widen:
+            corr = gaussian_blur(corr, WIDEN_SIGMA)
         coarse = torch.nan_to_num(combine_pairs(self.sampler.sample(corr, self.offsets)), nan=-1.0)
         centre = self.offsets[torch.argmax(coarse, dim=1)]  # (T,)
         fine = centre[:, None] + self.window[None, :]  # (T, 9)
@@ -67,4 +92,7 @@ class Measurer:
                            torch.zeros_like(denom))
         e = torch.gather(fine, 1, j)[:, 0] + PEAK_OFFSETS * frac[:, 0].clamp(-0.5, 0.5)
         ok = inner[:, 0]
-        return torch.where(ok, e, torch.full_like(e, float("nan"))), torch.where(ok, c0[:, 0], torch.zeros_like(e))
+        strength = c0[:, 0]
+        if self.widen:
+            strength = combine_pairs(self.sampler.sample(raw, e[:, None].nan_to_num(0.0), "bicubic"))[:, 0]
+        return torch.where(ok, e, torch.full_like(e, float("nan"))), torch.where(ok, strength, torch.zeros_like(e))

@@ -38,6 +38,12 @@ class CostVolume:
         flat[rows[ok], j[ok]] = torch.where(torch.isfinite(old), torch.maximum(old, new), new)
 
 
+    def at(self, disparity: torch.Tensor) -> torch.Tensor:
+        """The values ``(ty, tx)`` in the bins nearest to ``disparity (ty, tx)`` (NaN where not measured)."""
+        j = torch.round((disparity - self.d_min) / self.step).long().clamp(0, self.bins - 1)
+        return torch.gather(self.values, -1, j[..., None])[..., 0]
+
+
 def _path_costs(cost: torch.Tensor, dy: int, dx: int, p1: float, p2: float) -> torch.Tensor:
     """SGM along one direction: L(p, d) = C(p, d) + min(L(q, d), L(q, d +- 1) + p1, min L(q) + p2) - min L(q),
     q = p - (dy, dx); ``cost (H, W, D)``."""
