@@ -1,9 +1,9 @@
-"""The disparity engine: one first stage and one refinement for any rig (geometry_and_lma.md C.1, C.6).
+"""The disparity engine: one first stage and one refinement for any rig (disparity.md §4, §5).
 
 Per frame: (1) coarse search - the frames binned 2x2 (mono) and correlated at a few targets, every pass's lags
 read along each pair's axis into a cost volume (``volume.CostVolume``), aggregated over the tile grid by SGM;
-(2) one full-resolution pass at the coarse answer, read the same way within +-``reach`` px and aggregated again;
-(3) refinement - re-correlation at target + residual (secant step on a sign flip) on the tiles that still move
+(2) one full-resolution pass at the coarse answer, read the same way within +-``reach`` px and aggregated again,
+then a full-range sweep of only the tiles whose choice is doubtful; (3) refinement - re-correlation at target + residual (secant step on a sign flip) on the tiles that still move
 (the processor's ``active`` mask, so a pass costs only those tiles). ``tile_passes`` counts tiles x cameras
 processed per frame in units of one full-resolution pass (a binned pass counts 1/4).
 """
