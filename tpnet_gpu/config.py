@@ -167,25 +167,22 @@ class TrainConfig:
 
 @dataclass(frozen=True)
 class EngineConfig:
-    """The disparity engine (tpnet_gpu/disparity): a coarse-to-fine cost-volume search, then sparse refinement.
+    """The disparity engine (tpnet_gpu/disparity, docs/disparity.md): a sparse full-range search, one pass of
+    every tile at its answer, a full-range sweep of the doubtful tiles, then sparse refinement.
 
-    Disparities in px of the full frame. ``d_min``/``d_max``: the range searched (None for d_max: from the rig and
-    ``nearest_m``). Coarse stage: frames binned 2x2 (mono), targets every ``coarse_step`` coarse px, each pass's
-    correlations used within +-``reach`` px of its target. Full resolution: one pass at the coarse answer, read
-    within +-``reach``; tiles whose choice is doubtful there (aggregated-cost margin < ``verify_margin`` with a
-    correlation >= ``verify_strength`` at the choice) are swept over the whole range at full resolution (only
-    those tiles) and chosen again. Aggregation (SGM over the tile grid) penalties ``p1`` (one-bin step), ``p2`` (any jump),
-    on costs 1 - correlation, bins of ``bin_step`` px. Refinement: LMA (quad) or the pairs' combined peak
-    (any rig) re-correlation, at most ``refine_passes`` passes over the tiles that still move more than
-    ``tolerance`` px; a measurement counts where its strength >= ``min_strength`` and |residual| <= ``trust``.
-    ``measure``: "axis" (the pairs' combined peak, any rig, all on the device) or "lma" (the quad's LMA peak
-    fit, float64 on the host); the same flat-tile precision on 4 rendered tuning scenes (own-inlier RMSE
-    0.077-0.117 axis, 0.072-0.114 LMA); rigs other than the quad always use "axis"."""
+    Disparities in px. ``d_min``/``d_max``: the range searched (None for d_max: from the rig and ``nearest_m``).
+    Each pass's correlations are read within +-``reach`` px of its target; sweeps step 2 ``reach`` - 2 px.
+    A tile is doubtful when its aggregated-cost margin is < ``verify_margin`` with a correlation >=
+    ``verify_strength`` at its choice. Aggregation (SGM over the tile grid) penalties ``p1`` (one-bin step),
+    ``p2`` (any jump), on costs 1 - correlation, bins of ``bin_step`` px. Refinement: at most ``refine_passes``
+    re-correlations of the tiles that still move more than ``tolerance`` px; a measurement counts where its
+    strength >= ``min_strength`` and |residual| <= ``trust``. ``measure``: "axis" (the pairs' combined peak, any
+    rig, all on the device) or "lma" (the quad's LMA peak fit, float64 on the host); the same flat-tile precision
+    on rendered tuning scenes; rigs other than the quad always use "axis"."""
 
     d_min: float = 0.0
     d_max: float | None = None
     nearest_m: float = 8.0
-    coarse_step: float = 10.0
     reach: float = 6.0
     bin_step: float = 0.5
     p1: float = 0.08
@@ -201,7 +198,7 @@ class EngineConfig:
     def __post_init__(self):
         if self.measure not in MEASURES:
             raise ValueError(f"EngineConfig.measure: expected one of {MEASURES}, got {self.measure!r}")
-        for name in ("coarse_step", "reach", "bin_step", "nearest_m", "tolerance", "trust"):
+        for name in ("reach", "bin_step", "nearest_m", "tolerance", "trust"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
                 raise ValueError(f"EngineConfig.{name}: expected a finite number > 0, got {value!r}")

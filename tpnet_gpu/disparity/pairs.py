@@ -63,7 +63,8 @@ class AxisSampler:
         values = values.reshape(tiles, npairs, -1)
         overlap = self._overlap(lag[..., 0]) * self._overlap(lag[..., 1])
         inside = (lag.abs() <= CORR_RADIUS + 1e-4).all(dim=-1)
-        return torch.where(inside, values / overlap.clamp(min=0.05), torch.full_like(values, float("nan")))
+        overlap = overlap.clamp(min=0.05)
+        return torch.where(inside, values / overlap, torch.full_like(values, float("nan")))
 
 
 def combine_pairs(values: torch.Tensor, offset: float = 0.1) -> torch.Tensor:
