@@ -117,8 +117,10 @@ def test_bench_network(tmp_path, capsys):
     argv = ["--scenes", "1", "--passes", "1", "--height", "64", "--width", "64", "--png", str(png or "")]
     report, out, err = run_bench(bench_network, argv, tmp_path, capsys)
     assert ACCURACY_KEYS | {"passes"} <= set(report)
-    assert list(report["stats"]) == ["LMA baseline", "TPNET (1 pass)"]
-    _check_accuracy(report, {"LMA baseline"})
+    assert list(report["stats"]) == ["old sweep + LMA", "engine", "engine (LMA)", "TPNET (1 pass)"]
+    _check_accuracy(report, {"old sweep + LMA", "engine", "engine (LMA)"})
+    passes = report["per_frame"]
+    assert passes["old sweep + LMA"]["tile_passes"] >= 8 and 0 < passes["engine"]["tile_passes"] <= 6
     assert report["table"][0] in out and "[bench_network]" in err
     assert png is None or png.stat().st_size > 0
 
