@@ -181,21 +181,25 @@ def test_process_argument_errors_are_one_line(tmp_path, monkeypatch, capsys, arg
     assert err.startswith("tpnet process: error: ") and err.count("\n") == 1 and message in err, err
 
 
-def test_process_photograph_pair_end_to_end(tmp_path):
-    """Oracle: the known shift. A grey 8-bit photograph shifted by +-d/2 (exact Fourier shift) and saved as PNG
-    pair: ``tpnet process LEFT RIGHT --max-disparity`` writes the left view's disparity map (the tile grid
-    follows the left camera) with median error <= 0.1 px."""
+@pytest.mark.parametrize("colour", ["grey", "rgb"])
+def test_process_photograph_pair_end_to_end(tmp_path, colour):
+    """Oracle: the known shift. An 8-bit photograph (grey ``camera`` or RGB ``astronaut``) shifted by +-d/2
+    (exact Fourier shift, per channel) and saved as a PNG pair: ``tpnet process LEFT RIGHT --max-disparity``
+    writes the left view's disparity map (the tile grid follows the left camera) with median error <= 0.1 px."""
     import skimage.data
     import tifffile
 
     from tests.textures import fourier_shift
 
-    photo = skimage.data.camera().astype(np.float64)[280:400, 150:350]  # the textured lower half
+    if colour == "grey":
+        photo = skimage.data.camera().astype(np.float64)[280:400, 150:350]  # the textured lower half
+    else:
+        photo = np.moveaxis(skimage.data.astronaut().astype(np.float64)[300:420, 100:300], -1, 0)  # (3, H, W)
     d = 4.6
     paths = []
     for name, shift in (("left.png", d / 2), ("right.png", -d / 2)):  # left view: content right of the centre's
         image = np.clip(np.round(fourier_shift(photo, shift, 0.0)), 0, 255).astype(np.uint8)
-        Image.fromarray(image).save(tmp_path / name)
+        Image.fromarray(image if image.ndim == 2 else np.moveaxis(image, 0, -1)).save(tmp_path / name)
         paths.append(str(tmp_path / name))
     out = tmp_path / "o"
     assert main(["process", *paths, "--max-disparity", "10", "--out", str(out), "--device", "cpu"]) == 0
