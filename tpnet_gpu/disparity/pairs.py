@@ -55,15 +55,14 @@ class AxisSampler:
         ``mode`` "bicubic" for sub-pixel peaks (bilinear samples of a sharp peak pull its parabola toward whole
         lags: +0.19 px median on a rendered plane at 3.3 px, 0.03 bicubic), "bilinear" for cost volumes."""
         tiles, npairs = corr.shape[:2]
-        e = e.expand(tiles, -1) if e.dim() == 1 else e
-        lag = -e[:, None, :, None] * self.vectors[None, :, None, :]  # (T, P, E, 2) x, y
-        grid = (lag / CORR_RADIUS).reshape(tiles * npairs, 1, -1, 2)
+        shared = e.dim() == 1  # the same offsets for every tile: the overlap is one (P, E) table
+        lag = -(e[None, :] if shared else e)[:, None, :, None] * self.vectors[None, :, None, :]  # (T|1, P, E, 2)
+        grid = (lag.expand(tiles, -1, -1, -1) / CORR_RADIUS).reshape(tiles * npairs, 1, -1, 2)
         values = F.grid_sample(corr.reshape(tiles * npairs, 1, 2 * CORR_RADIUS + 1, 2 * CORR_RADIUS + 1).float(),
                                grid, mode=mode, padding_mode="zeros", align_corners=True)
         values = values.reshape(tiles, npairs, -1)
-        overlap = self._overlap(lag[..., 0]) * self._overlap(lag[..., 1])
+        overlap = (self._overlap(lag[..., 0]) * self._overlap(lag[..., 1])).clamp(min=0.05)
         inside = (lag.abs() <= CORR_RADIUS + 1e-4).all(dim=-1)
-        overlap = overlap.clamp(min=0.05)
         return torch.where(inside, values / overlap, torch.full_like(values, float("nan")))
 
 
