@@ -97,6 +97,10 @@ class DisparityEngine:
         self.sparse_tiles[::SPARSE, ::SPARSE] = True
         self.sparse_grid = tuple((n + SPARSE - 1) // SPARSE for n in self.grid)
         self.sparse_share = float(self.sparse_tiles.float().mean())
+        # the cost volumes, (tiles_y, tiles_x, bins) and that of the sparse grid: allocated once, reset per frame
+        lo, hi = config.d_min - config.reach, self.d_max + config.reach
+        self.volume = CostVolume(self.grid, lo, hi, config.bin_step, self.device)
+        self.sparse_volume = CostVolume(self.sparse_grid, lo, hi, config.bin_step, self.device)
 
     # --- first stage ---------------------------------------------------------------------------------------
     def _sweep(self, tp: TileProcessor, targets, volume: CostVolume, grid, active=None) -> None:
@@ -138,13 +142,13 @@ class DisparityEngine:
     def search(self) -> tuple[torch.Tensor, torch.Tensor, float]:
         """First stage on the frame loaded into the processor: ``(search, margin, passes)``."""
         cfg = self.config
-        volume = CostVolume(self.grid, cfg.d_min - cfg.reach, self.d_max + cfg.reach, cfg.bin_step, self.device)
+        volume, sparse = self.volume, self.sparse_volume
+        volume.values.fill_(float("nan"))
         # (1) every SPARSE-th tile in each direction swept over the whole range, chosen on its own sparse grid
         sweep = self._full_sweep()
         self._sweep(self.tp, sweep, volume, self.grid, active=self.sparse_tiles)
         passes = len(sweep) * self.sparse_share
-        sparse = CostVolume(self.sparse_grid, volume.d_min, self.d_max + cfg.reach, cfg.bin_step, self.device)
-        sparse.values = volume.values[::SPARSE, ::SPARSE].contiguous()
+        sparse.values.copy_(volume.values[::SPARSE, ::SPARSE])
         coarse, _ = self._choose(sparse)
         start = coarse.repeat_interleave(SPARSE, 0).repeat_interleave(SPARSE, 1)[: self.grid[0], : self.grid[1]]
         # (2) every tile at that answer, aggregated with what (1) saw
