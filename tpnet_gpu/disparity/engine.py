@@ -100,14 +100,15 @@ class DisparityEngine:
         # the cost volumes, (tiles_y, tiles_x, bins) and that of the sparse grid: allocated once, reset per frame
         lo, hi = config.d_min - config.reach, self.d_max + config.reach
         self.volume = CostVolume(self.grid, lo, hi, config.bin_step, self.device)
+        self._uniform = torch.zeros(self.grid, device=self.device)  # a sweep pass's uniform target
         self.sparse_volume = CostVolume(self.sparse_grid, lo, hi, config.bin_step, self.device)
 
     # --- first stage ---------------------------------------------------------------------------------------
-    def _sweep(self, tp: TileProcessor, targets, volume: CostVolume, grid, active=None) -> None:
+    def _sweep(self, tp: TileProcessor, targets, volume: CostVolume, active=None) -> None:
         """Measure the loaded frame at each target (uniform numbers or ``(ty, tx)`` tensors) into ``volume``
         (only the ``active`` tiles, when a mask is given)."""
         for target in targets:
-            t = target if isinstance(target, torch.Tensor) else torch.full(grid, float(target), device=self.device)
+            t = target if isinstance(target, torch.Tensor) else self._uniform.fill_(float(target))
             corr = self.measure_at(tp, t, active=active).corr
             combined = combine_pairs(self.sampler.sample(corr, self.offsets))
             if active is not None:
@@ -146,20 +147,20 @@ class DisparityEngine:
         volume.values.fill_(float("nan"))
         # (1) every SPARSE-th tile in each direction swept over the whole range, chosen on its own sparse grid
         sweep = self._full_sweep()
-        self._sweep(self.tp, sweep, volume, self.grid, active=self.sparse_tiles)
+        self._sweep(self.tp, sweep, volume, active=self.sparse_tiles)
         passes = len(sweep) * self.sparse_share
         sparse.values.copy_(volume.values[::SPARSE, ::SPARSE])
         coarse, _ = self._choose(sparse)
         start = coarse.repeat_interleave(SPARSE, 0).repeat_interleave(SPARSE, 1)[: self.grid[0], : self.grid[1]]
         # (2) every tile at that answer, aggregated with what (1) saw
-        self._sweep(self.tp, [start], volume, self.grid)
+        self._sweep(self.tp, [start], volume)
         passes += 1.0
         found, margin = self._choose(volume)
         # (3) tiles with a peak but a close rival (textureless tiles have no peak anywhere: not worth a sweep)
         doubtful = (margin < cfg.verify_margin) & (volume.at(found) >= cfg.verify_strength)
         share = float(doubtful.float().mean())
         if share > 0:
-            self._sweep(self.tp, sweep, volume, self.grid, active=doubtful)
+            self._sweep(self.tp, sweep, volume, active=doubtful)
             passes += len(sweep) * share
             found, margin = self._choose(volume)
         return found, margin, passes

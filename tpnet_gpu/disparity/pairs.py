@@ -41,7 +41,6 @@ class AxisSampler:
         self.vectors = torch.as_tensor(v, dtype=torch.float32, device=device)  # (P, 2)
         self.reach = float(CORR_RADIUS / np.abs(v).max())  # |e| the lags of every pair reach
         k = np.linspace(0.0, TILE_SIZE, 4 * TILE_SIZE + 1)
-        self._ov_k = torch.as_tensor(k, dtype=torch.float32, device=device)
         self._ov = torch.as_tensor(window_overlap(k), dtype=torch.float32, device=device)
 
     def _overlap(self, shift: torch.Tensor) -> torch.Tensor:

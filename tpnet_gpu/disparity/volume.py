@@ -49,7 +49,6 @@ def _path_costs(cost: torch.Tensor, dy: int, dx: int, p1: float, p2: float) -> t
     q = p - (dy, dx); ``cost (H, W, D)``."""
     height, width, _ = cost.shape
     out = torch.empty_like(cost)
-    big = torch.tensor(float("inf"), device=cost.device)
     # walk the grid in the direction's order, one line of tiles at a time (rows for dy != 0, else columns)
     if dy != 0:
         order = range(height) if dy > 0 else range(height - 1, -1, -1)
@@ -66,19 +65,19 @@ def _path_costs(cost: torch.Tensor, dy: int, dx: int, p1: float, p2: float) -> t
                     shifted[:-1] = prev[1:]
                 else:
                     shifted = prev
-                out[y] = c + _step(shifted, p1, p2, big)
+                out[y] = c + _step(shifted, p1, p2)
             prev = out[y]
     else:
         order = range(width) if dx > 0 else range(width - 1, -1, -1)
         prev = None
         for x in order:
             c = cost[:, x]
-            out[:, x] = c if prev is None else c + _step(prev, p1, p2, big)
+            out[:, x] = c if prev is None else c + _step(prev, p1, p2)
             prev = out[:, x]
     return out
 
 
-def _step(prev: torch.Tensor, p1: float, p2: float, big: torch.Tensor) -> torch.Tensor:
+def _step(prev: torch.Tensor, p1: float, p2: float) -> torch.Tensor:
     """min(L(d), L(d +- 1) + p1, min L + p2) - min L over a line of tiles ``(N, D)`` (inf where no tile)."""
     low = torch.amin(prev, dim=-1, keepdim=True)
     finite = torch.isfinite(low)
