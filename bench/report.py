@@ -129,7 +129,7 @@ def table(stats: dict, title: str, reference: str, per_frame: dict | None = None
     name = max(6, *(len(m) for m in methods))
     tops = [f"top {f:.0%}" for f in fractions]
     head = (f"{'method':{name}} | {'gross':>6} {'either':>6} {'rmse-in':>7} {'rmse-ref':>8} {'x ref':>7} "
-            f"{'new-gross':>11} {'cover':>5} | " + " ".join(f"{t:>13}" for t in tops) + (" | " if tops else "")
+            f"{'new-gross':>11} {'cover':>5} {'right':>5} | " + " ".join(f"{t:>13}" for t in tops) + (" | " if tops else "")
             + " ".join(f"{column:>{len(fmt.format(0))}}" for column, fmt in PER_FRAME.values()))
     legend = ("gross: |error| > 1 px (error: vs the centre ray's disparity); either: > 1 px from every surface "
               f"covering >= {evaluation.MIN_SURFACE_SHARE:.0%} of the tile's 16x16 window; rmse-in: RMSE on the "
@@ -137,7 +137,7 @@ def table(stats: dict, title: str, reference: str, per_frame: dict | None = None
               + (f"rmse-ref: RMSE on the tiles {reference} gets within 1 px (the paper's protocol), x ref: its ratio "
                  f"to {reference}'s; new-gross: tiles {reference} gets within 1 px that the method makes gross "
                  "(count, share of them); " if common else "")
-              + "cover: share of the tiles with an estimate; "
+              + "cover: share of the tiles with an estimate; right: share of the tiles with one within 1 px; "
               + ("top N %: gross/either among the method's most confident N % of its estimates; " if tops else "")
               + "passes: tile-passes per frame, s/frame: seconds per frame (as the bench measured)")
     lines = [title, *textwrap.wrap(legend, len(head)), head, "-" * len(head)]
@@ -151,7 +151,7 @@ def table(stats: dict, title: str, reference: str, per_frame: dict | None = None
             costs = per_frame.get(method, {})
             cells = [f"{method:{name}} | {_rate(v['gross'], 6)} {_rate(v.get('gross_either'), 6)} "
                      f"{_px(v['rmse_inliers'], 7)} {_px(v.get('rmse_common'), 8)} {ratio:>7} {new:>11} "
-                     f"{_rate(v['coverage'], 5, 0)} |"]
+                     f"{_rate(v['coverage'], 5, 0)} {_rate(v.get('right'), 5, 0)} |"]
             if tops:
                 cells.append(" ".join(f"{_ranking_cell(v['confidence_ranking'], i):>13}" for i in range(len(tops)))
                              + " |")

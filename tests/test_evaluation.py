@@ -23,6 +23,7 @@ def test_classes_and_stats():
     stats = evaluation.error_stats(est, gt, cls["flat"])
     # flat: column 1 rows 2-4 and column 4 rows 1-4 (column 2 and 3 see the edge, (1, 1) has no texture)
     assert stats["tiles"] == 7 and np.isclose(stats["coverage"], 6 / 7)
+    assert np.isclose(stats["right"], 5 / 7)  # the NaN and the gross tile are not right
     assert np.isclose(stats["rmse"], np.sqrt((0.25 + 9.0) / 6)) and np.isclose(stats["gross"], 1 / 6)
     assert np.isclose(stats["rmse_inliers"], np.sqrt(0.25 / 5))
     bins = evaluation.rmse_by_spread(est, gt, cls["all"])

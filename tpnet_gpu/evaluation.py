@@ -99,9 +99,10 @@ def _new_gross(gross: np.ndarray, right: np.ndarray) -> dict:
 
 def error_stats(estimate: np.ndarray, gt: np.ndarray, mask: np.ndarray, common: np.ndarray | None = None,
                 surfaces: np.ndarray | None = None) -> dict:
-    """RMSE, median |error|, coverage (share of the masked tiles with a finite estimate), the share of strict
-    gross errors (``gross``: |error| > 1 px among the finite ones) and the RMSE of the rest (``rmse_inliers``,
-    the method's own inliers). With ``common`` (a mask of tiles chosen the same for every method, e.g.
+    """RMSE, median |error|, coverage (share of the masked tiles with a finite estimate), ``right`` (share of
+    the masked tiles with an estimate within 1 px: coverage that counts only right answers, so a method cannot
+    gain it by emitting wrong ones), the share of strict gross errors (``gross``: |error| > 1 px among the
+    finite ones) and the RMSE of the rest (``rmse_inliers``, the method's own inliers). With ``common`` (a mask of tiles chosen the same for every method, e.g.
     :func:`reference_inliers`), also ``rmse_common``: the RMSE over the tiles of ``mask & common`` the estimate
     covers (its ``coverage`` says how many it misses), and ``new_gross`` / ``new_gross_share``: how many of the
     tiles of ``mask & common`` the estimate makes gross, and their share (:func:`new_gross`). With
@@ -127,6 +128,7 @@ def error_stats(estimate: np.ndarray, gt: np.ndarray, mask: np.ndarray, common: 
     return {
         "tiles": int(mask.sum()),
         "coverage": float(ok.mean()) if ok.size else 0.0,
+        "right": float(inliers.size / ok.size) if ok.size else 0.0,
         "rmse": float(np.sqrt(np.mean(err**2))) if err.size else float("nan"),
         "median_abs": float(np.median(np.abs(err))) if err.size else float("nan"),
         "gross": _share(np.abs(err) > GROSS_ERROR),

@@ -68,16 +68,16 @@ def test_table_columns_and_blanks():
     lines = report.table(stats, "title", REF, report.per_frame(scenes, [REF, METHOD]))
     assert lines[0] == "title" and max(map(len, lines)) < 200
     head = lines[next(i for i, line in enumerate(lines) if set(line) == {"-"}) - 1]
-    for column in ("gross", "either", "rmse-in", "rmse-ref", "x ref", "new-gross", "cover", "top 90%", "top 75%",
+    for column in ("gross", "either", "rmse-in", "rmse-ref", "x ref", "new-gross", "cover", "right", "top 90%", "top 75%",
                    "passes", "s/frame"):
         assert column in head
     block = lines.index("all (12 tiles)")
     ref_row, method_row = lines[block + 1], lines[block + 2]
-    assert ref_row.split() == [REF, "|", "20.0%", "20.0%", "0.112", "0.112", "1.00x", "(ref)", "83%", "|",
+    assert ref_row.split() == [REF, "|", "20.0%", "20.0%", "0.112", "0.112", "1.00x", "(ref)", "83%", "67%", "|",
                                "11.1%/11.1%", "0.0%/0.0%", "|"]  # no costs handed in: blank
-    assert method_row.split() == [METHOD, "|", "60.0%", "40.0%", "0.212", "1.454", "13.00x", "4", "50.0%", "83%", "|",
+    assert method_row.split() == [METHOD, "|", "60.0%", "40.0%", "0.212", "1.454", "13.00x", "4", "50.0%", "83%", "33%", "|",
                                   "|", "100", "2.00"]  # no confidences: blank
     assert lines[-1] == method_row
     stats, _ = report.summarise(scenes, [REF, METHOD])  # no reference: its columns blank
     method_row = report.table(stats, "title", REF)[-1]
-    assert method_row.split() == [METHOD, "|", "60.0%", "40.0%", "0.212", "83%", "|", "|"]
+    assert method_row.split() == [METHOD, "|", "60.0%", "40.0%", "0.212", "83%", "33%", "|", "|"]

@@ -25,7 +25,7 @@ SPEED_KEYS = {"frame", "timing", "stages", "device", "machine", "paper", "agreem
 ACCURACY_KEYS = {"bench", "scenes", "width", "height", "seed", "machine", "stats", "per_frame", "rmse_by_spread",
                  "table"}
 CLASSES = {"flat", "edge", "low_texture", "all"}
-CLASS_STATS = {"tiles", "coverage", "rmse", "median_abs", "gross", "gross_either", "rmse_inliers", "rmse_common",
+CLASS_STATS = {"tiles", "coverage", "right", "rmse", "median_abs", "gross", "gross_either", "rmse_inliers", "rmse_common",
                "new_gross", "new_gross_share", "confidence_ranking"}  # evaluation.error_stats + confidence_ranking
 
 
