@@ -45,4 +45,9 @@ def test_volume_add_keeps_the_stronger_sample():
     volume.add(torch.tensor([[2.0, 2.0]]), offsets, torch.tensor([[0.9, 0.1, 0.0], [0.1, 0.1, 0.1]]), reach=1.0)
     v = volume.values[0]
     assert torch.allclose(v[0, :4], torch.tensor([0.1, 0.9, 0.2, 0.0]))  # bin 1: 0.5 then 0.9 -> 0.9
-    assert torch.isnan(v[0, 4]) and torch.allclose(v[1, 1:4], torch.tensor([0.3, 0.3, 0.3]))
+    assert torch.isneginf(v[0, 4]) and torch.allclose(v[1, 1:4], torch.tensor([0.3, 0.3, 0.3]))
+    assert torch.isnan(volume.at(torch.tensor([[4.0, 0.0]]))[0, 0]) and float(volume.cost()[0, 0, 4]) == 1.0
+    # a pass over chosen tiles only (flat numbers): tile 1 gets it, NaN targets and values are skipped
+    volume.add(torch.tensor([0.0, float("nan")]), offsets, torch.tensor([[0.7, 0.8, float("nan")], [1.0] * 3]),
+               reach=1.0, tiles=torch.tensor([1, 0]))
+    assert torch.allclose(v[1, :2], torch.tensor([0.8, 0.3])) and torch.allclose(v[0, :4], torch.tensor([0.1, 0.9, 0.2, 0.0]))

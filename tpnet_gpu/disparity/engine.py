@@ -95,6 +95,7 @@ class DisparityEngine:
         self.calibrated = not self.rig.is_ideal()
         self.sparse_tiles = torch.zeros(self.grid, dtype=torch.bool, device=self.device)
         self.sparse_tiles[::SPARSE, ::SPARSE] = True
+        self.sparse_index = torch.nonzero(self.sparse_tiles.reshape(-1))[:, 0]  # (sparse tiles,) flat numbers
         self.sparse_grid = tuple((n + SPARSE - 1) // SPARSE for n in self.grid)
         self.sparse_share = float(self.sparse_tiles.float().mean())
         # the cost volumes, (tiles_y, tiles_x, bins) and that of the sparse grid: allocated once, reset per frame
@@ -106,14 +107,18 @@ class DisparityEngine:
     # --- first stage ---------------------------------------------------------------------------------------
     def _sweep(self, tp: TileProcessor, targets, volume: CostVolume, active=None) -> None:
         """Measure the loaded frame at each target (uniform numbers or ``(ty, tx)`` tensors) into ``volume``
-        (only the ``active`` tiles, when a mask is given)."""
+        (only the ``active`` tiles, when a mask is given: only their correlations are read, a sparse pass
+        costs its share of the tiles here as in the processor)."""
+        tiles = None if active is None else (
+            self.sparse_index if active is self.sparse_tiles else torch.nonzero(active.reshape(-1))[:, 0])
         for target in targets:
             t = target if isinstance(target, torch.Tensor) else self._uniform.fill_(float(target))
             corr = self.measure_at(tp, t, active=active).corr
-            combined = combine_pairs(self.sampler.sample(corr, self.offsets))
-            if active is not None:
-                combined = torch.where(active.reshape(-1, 1), combined, torch.full_like(combined, float("nan")))
-            volume.add(t, self.offsets, combined, self.config.reach)
+            t = t.reshape(-1)
+            if tiles is not None:
+                corr, t = corr.index_select(0, tiles), t.index_select(0, tiles)
+            volume.add(t, self.offsets, combine_pairs(self.sampler.sample(corr, self.offsets)), self.config.reach,
+                       tiles)
 
     def set_targets(self, tp: TileProcessor, target: torch.Tensor, active=None) -> None:
         """Targets ``(ty, tx)`` into ``tp``: a calibrated rig's tile centres at full resolution (the rig's model
@@ -132,8 +137,7 @@ class DisparityEngine:
         return tp.result
 
     def _choose(self, volume: CostVolume) -> tuple[torch.Tensor, torch.Tensor]:
-        cost = 1.0 - torch.nan_to_num(volume.values, nan=0.0).clamp(-1.0, 1.0)
-        return pick(aggregate(cost, self.config.p1, self.config.p2), volume.disparities, volume.step)
+        return pick(aggregate(volume.cost(), self.config.p1, self.config.p2), volume.disparities, volume.step)
 
     def _full_sweep(self) -> np.ndarray:
         """Uniform targets covering [d_min, d_max], each read within +-reach (2 px overlap between passes)."""
@@ -144,7 +148,7 @@ class DisparityEngine:
         """First stage on the frame loaded into the processor: ``(search, margin, passes)``."""
         cfg = self.config
         volume, sparse = self.volume, self.sparse_volume
-        volume.values.fill_(float("nan"))
+        volume.reset()
         # (1) every SPARSE-th tile in each direction swept over the whole range, chosen on its own sparse grid
         sweep = self._full_sweep()
         self._sweep(self.tp, sweep, volume, active=self.sparse_tiles)

@@ -15,33 +15,41 @@ DIRECTIONS = ((0, 1), (1, 0), (0, -1), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -
 
 
 class CostVolume:
-    """``(tiles_y, tiles_x, bins)`` combined correlations (NaN = not measured) over bins ``d_min + j step``."""
+    """``(tiles_y, tiles_x, bins)`` combined correlations over bins ``d_min + j step``; -inf = not measured
+    (the identity of the max that merges overlapping passes, so merging is one scatter with no host sync)."""
 
     def __init__(self, grid: tuple[int, int], d_min: float, d_max: float, step: float, device):
         self.grid, self.step, self.d_min = grid, float(step), float(d_min)
         self.bins = int(round((d_max - d_min) / step)) + 1
-        self.values = torch.full((*grid, self.bins), float("nan"), device=device)
+        self.values = torch.full((*grid, self.bins), float("-inf"), device=device)
         self.disparities = self.d_min + self.step * torch.arange(self.bins, device=device, dtype=torch.float32)
 
-    def add(self, target: torch.Tensor, offsets: torch.Tensor, combined: torch.Tensor, reach: float) -> None:
-        """Put a pass's combined correlations ``(T, E)`` at ``target (ty, tx) + offsets (E,)`` into the bins
-        they hit (nearest bin; |offset| <= ``reach``); keeps the larger value where a bin was already filled."""
-        tiles = target.numel()
-        d = target.reshape(-1, 1) + offsets[None, :]
-        j = torch.round((d - self.d_min) / self.step).long()
-        ok = (j >= 0) & (j < self.bins) & (offsets.abs()[None, :] <= reach) & torch.isfinite(combined)
-        ok &= torch.isfinite(target.reshape(-1, 1))
-        flat = self.values.view(tiles, self.bins)
-        rows = torch.arange(tiles, device=d.device)[:, None].expand_as(j)
-        old = flat[rows[ok], j[ok]]
-        new = combined[ok]
-        flat[rows[ok], j[ok]] = torch.where(torch.isfinite(old), torch.maximum(old, new), new)
+    def reset(self) -> None:
+        """Every bin back to not measured (a new frame)."""
+        self.values.fill_(float("-inf"))
 
+    def add(self, target: torch.Tensor, offsets: torch.Tensor, combined: torch.Tensor, reach: float,
+            tiles: torch.Tensor | None = None) -> None:
+        """Put a pass's combined correlations ``(N, E)`` at ``target (N,) + offsets (E,)`` into the bins they hit
+        (nearest bin; |offset| <= ``reach``; NaN values and targets are skipped) of the tiles ``tiles`` ``(N,)``
+        (flat tile numbers; default all, N = tiles_y * tiles_x); keeps the larger value where a bin was filled."""
+        rows = torch.arange(target.numel(), device=target.device) if tiles is None else tiles
+        d = target.reshape(-1, 1) + offsets[None, :]
+        j = torch.round((torch.nan_to_num(d, nan=self.d_min - self.step) - self.d_min) / self.step)
+        ok = (j >= 0) & (j < self.bins) & (offsets.abs()[None, :] <= reach) & torch.isfinite(combined)
+        index = rows[:, None] * self.bins + j.clamp(0, self.bins - 1).long()
+        source = torch.where(ok, combined, torch.full_like(combined, float("-inf")))
+        self.values.view(-1).scatter_reduce_(0, index.reshape(-1), source.reshape(-1), "amax")
+
+    def cost(self) -> torch.Tensor:
+        """``(tiles_y, tiles_x, bins)`` matching cost 1 - correlation (clamped to [-1, 1]; 1 where not measured)."""
+        return 1.0 - torch.where(torch.isfinite(self.values), self.values, torch.zeros_like(self.values)).clamp(-1, 1)
 
     def at(self, disparity: torch.Tensor) -> torch.Tensor:
         """The values ``(ty, tx)`` in the bins nearest to ``disparity (ty, tx)`` (NaN where not measured)."""
         j = torch.round((disparity - self.d_min) / self.step).long().clamp(0, self.bins - 1)
-        return torch.gather(self.values, -1, j[..., None])[..., 0]
+        v = torch.gather(self.values, -1, j[..., None])[..., 0]
+        return torch.where(torch.isfinite(v), v, torch.full_like(v, float("nan")))
 
 
 def _path_costs(cost: torch.Tensor, dy: int, dx: int, p1: float, p2: float) -> torch.Tensor:
