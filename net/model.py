@@ -40,7 +40,7 @@ CLUSTER_SIDE = 5
 CLUSTER_RADIUS = CLUSTER_SIDE // 2  # 2
 CLUSTER_TILES = CLUSTER_SIDE * CLUSTER_SIDE  # 25
 CENTRE = CLUSTER_TILES // 2  # 12
-CLONE_RADII = (2, 1, 0)  # clone n keeps positions with max(|dy|, |dx|) <= CLONE_RADII[n]
+CLONE_RADII = tuple(range(CLUSTER_RADIUS, -1, -1))  # (2, 1, 0): clone n keeps max(|dy|, |dx|) <= CLONE_RADII[n]
 NEGATIVE_SLOPE = 0.2  # LeakyReLU as coded: max(0.2 x, x)
 STAGE1_WIDTHS = (256, 128, 32)
 STAGE2_WIDTHS = (256, 64, 32, 16)
@@ -110,7 +110,7 @@ def tile_inputs(layers: Tensor, target: Tensor) -> Tensor:
                          f"got {tuple(target.shape)}")
     _check_like("target", target, layers, "layers")
     x = torch.cat([layers.reshape(*layers.shape[:-3], CORR_INPUTS), target.unsqueeze(-1)], dim=-1)
-    return x.masked_fill(x.isnan(), 0.0)
+    return x.masked_fill_(x.isnan(), 0.0)  # in place: x is cat's new tensor
 
 
 def gather_clusters(tile_map: Tensor, tile_y: Tensor, tile_x: Tensor) -> Tensor:
@@ -155,7 +155,7 @@ def stage1_features(x: Tensor, stage1: Sequence[Layer]) -> Tensor:
         :math:`(..., F)` features, ``F`` = last layer's width (32).
     """
     for weight, bias in stage1:
-        x = F.leaky_relu(F.linear(x, weight, bias), NEGATIVE_SLOPE)
+        x = F.leaky_relu(F.linear(x, weight, bias), NEGATIVE_SLOPE, inplace=True)  # in place on linear's output
     return x
 
 
@@ -184,7 +184,7 @@ def clone_masks(device=None, dtype=torch.float32) -> Tensor:
     """
     d = torch.arange(-CLUSTER_RADIUS, CLUSTER_RADIUS + 1, device=device).abs()
     cheb = torch.maximum(d[:, None], d[None, :])
-    radii = torch.tensor(CLONE_RADII, device=device)
+    radii = CLUSTER_RADIUS - torch.arange(len(CLONE_RADII), device=device)  # = CLONE_RADII, made on the device
     return (cheb[None] <= radii[:, None, None]).to(dtype)
 
 
@@ -213,8 +213,21 @@ def clusters_residual(x: Tensor, stage1: Sequence[Layer], stage2: Sequence[Layer
     return stage2_output(z, stage2).transpose(0, 1)  # (B, 3)
 
 
+def stage2_conv(first: Layer, clones: Sequence[int]) -> tuple[Tensor, Tensor]:
+    """Stage 2's first layer as 5x5 convolution kernels :math:`(n \\cdot hidden, F, 5, 5)` and biases
+    :math:`(n \\cdot hidden)`, one masked copy per clone: ``kernel[o, c, dy+2, dx+2] = W[o, k*F + c]``."""
+    weight, bias = first
+    hidden = weight.shape[0]
+    n_features = weight.shape[1] // CLUSTER_TILES
+    kernel = weight.view(hidden, CLUSTER_TILES, n_features).transpose(1, 2)
+    kernel = kernel.reshape(hidden, n_features, CLUSTER_SIDE, CLUSTER_SIDE)
+    masks = clone_masks(weight.device, weight.dtype)[list(clones)]  # (n, 5, 5)
+    return (kernel.unsqueeze(0) * masks[:, None, None]).flatten(0, 1), bias.repeat(len(clones))
+
+
 def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stage2: Sequence[Layer], *,
-                   grid: tuple[int, int] | None = None, active: Tensor | None = None, clone=0) -> Tensor:
+                   grid: tuple[int, int] | None = None, active: Tensor | None = None, clone=0,
+                   conv: tuple[Tensor, Tensor] | None = None) -> Tensor:
     """Whole-frame form: residual disparity of every tile, by convolutions with the cluster form's weights.
 
     Args:
@@ -224,6 +237,7 @@ def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stag
         grid: ``(ty, tx)``, required for tile-major ``layers``.
         active: optional :math:`(ty, tx)` bool; inactive tiles get zero stage-1 features.
         clone: 0, 1 or 2 (5x5, 3x3, centre-only stage 2), or a sequence of them (stage 1 runs once).
+        conv: ``stage2_conv(stage2[0], clones)`` when the caller keeps it (else made here).
 
     Returns:
         :math:`(ty, tx)` residuals for an int ``clone``; :math:`(ty, tx, n)` for a sequence of ``n`` clones
@@ -271,14 +285,9 @@ def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stag
     n_features = features.shape[-1]
     padded = F.pad(features.permute(2, 0, 1).unsqueeze(0), (CLUSTER_RADIUS,) * 4, mode="replicate")
 
-    weight, bias = stage2[0]
-    hidden = weight.shape[0]
-    # kernel[o, c, dy+2, dx+2] = W[o, k*F + c], k = (dy+2)*5 + (dx+2); one masked copy per clone.
-    kernel = weight.view(hidden, CLUSTER_TILES, n_features).transpose(1, 2)
-    kernel = kernel.reshape(hidden, n_features, CLUSTER_SIDE, CLUSTER_SIDE)
-    masks = clone_masks(weight.device, weight.dtype)[clones]  # (n, 5, 5)
-    kernels = (kernel.unsqueeze(0) * masks[:, None, None]).flatten(0, 1)  # (n*hidden, F, 5, 5)
-    z = F.conv2d(padded, kernels, bias.repeat(len(clones)))  # (1, n*hidden, ty, tx)
+    hidden = stage2[0][0].shape[0]
+    kernels, biases = conv if conv is not None else stage2_conv(stage2[0], clones)
+    z = F.conv2d(padded, kernels, biases)  # (1, n*hidden, ty, tx)
     z = z.view(len(clones), hidden, ty, tx).permute(2, 3, 0, 1)  # (ty, tx, n, hidden)
     z = F.leaky_relu(z, NEGATIVE_SLOPE) if len(stage2) > 1 else z
     residual = stage2_output(z, stage2[1:]) if len(stage2) > 1 else z.squeeze(-1)  # (ty, tx, n)
@@ -321,6 +330,7 @@ class TPNet(nn.Module):
         s2 = (CLUSTER_TILES * self.stage1_widths[-1], *self.stage2_widths, 1)
         self.stage1 = nn.ModuleList(nn.Linear(a, b) for a, b in zip(s1[:-1], s1[1:]))
         self.stage2 = nn.ModuleList(nn.Linear(a, b) for a, b in zip(s2[:-1], s2[1:]))
+        self._conv, self._conv_key = None, None  # inference's stage-2 kernels and the weights they came from
         self.reset_parameters()
 
     def reset_parameters(self) -> None:
@@ -351,7 +361,16 @@ class TPNet(nn.Module):
                       active: Tensor | None = None, clone=0) -> Tensor:
         """Residuals :math:`(ty, tx)` (or :math:`(ty, tx, n)` for a sequence of clones) of a whole frame
         (see :func:`frame_residual`)."""
-        return frame_residual(layers, target, *self._params(), grid=grid, active=active, clone=clone)
+        stage1, stage2 = self._params()
+        conv = None
+        if not torch.is_grad_enabled():  # inference: stage 2's kernels are made once per set of weights
+            clones = tuple(_clone_list(clone)[0])
+            weight, bias = stage2[0]
+            key = (clones, weight.data_ptr(), weight._version, bias.data_ptr(), bias._version)
+            if self._conv_key != key:
+                self._conv, self._conv_key = stage2_conv(stage2[0], clones), key
+            conv = self._conv
+        return frame_residual(layers, target, stage1, stage2, grid=grid, active=active, clone=clone, conv=conv)
 
     def predict_frame(self, layers: Tensor, target: Tensor, *, grid: tuple[int, int] | None = None,
                       active: Tensor | None = None, clone=0) -> Tensor:

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import torch
 
+from tests.allocations import torch_allocations, warp_host_allocations
 from tests.kernels.oracle import reference_clt, relative_error
 from tpnet_gpu.config import CorrelationConfig
 from tpnet_gpu.processor import TileProcessor
@@ -180,3 +181,22 @@ def test_graph_replay_equals_plain_launches(device):
         for name in ("clt", "corr", "layers", "valid", "texture"):
             torch.testing.assert_close(getattr(got, name), getattr(want, name), rtol=0, atol=0)
     assert sorted(graphed._backend.graphs) == [("centres", "convert", "correlate", "texture"), ("pad",)]
+
+
+def test_a_frame_allocates_nothing(backend, frames):
+    """Issue 14: in steady state a frame's ``load`` + ``measure`` + ``texture`` (numpy frames staged, a tensor
+    target) allocates no memory: oracle, torch's CPU allocation events (torch.profiler) and Warp's CPU allocator
+    (wrapped), both 0. Checked to fail: a ``torch.empty_like`` of the frames in ``load`` gives 1 event."""
+    tp = TileProcessor(H, W, textures=True, device="cpu", backend=backend)
+    target = torch.full((tp.tiles_y, tp.tiles_x), 1.5)
+
+    def frame():
+        tp.load(frames)
+        tp.measure(target)
+        tp.texture()
+
+    frame()
+    frame()  # warm-up: kernels compiled, views made
+    with warp_host_allocations() as warp_sizes:
+        torch_sizes = torch_allocations(frame)
+    assert torch_sizes == [] and warp_sizes == []

@@ -13,7 +13,7 @@ from tests.kernels.oracle import reference_clt, relative_error
 from tests.textures import fourier_shift, mosaic, smooth_noise
 from tpnet_gpu import tables
 from tpnet_gpu.config import TextureConfig
-from tpnet_gpu.processor import TileProcessor
+from tpnet_gpu.processor import TileProcessor, buffers
 from tpnet_gpu.reference import texture as tex
 
 H, W = 48, 64
@@ -25,12 +25,12 @@ def _scene(rng, d):
     return colour, np.stack([mosaic(fourier_shift(colour, *(-d * r))) for r in OFFSETS]).astype(np.float32)
 
 
-@pytest.mark.parametrize("cfa, diff_sigma", [("GRBG", 50.0), (None, 500.0)])
-def test_texture_equals_reference(device, backend, cfa, diff_sigma):
+def _check_against_reference(device, backend, cfa, diff_sigma, masked):
     rng = np.random.default_rng(50)
     _, frames = _scene(rng, 1.3)
     disparity = (1.3 + rng.uniform(-0.3, 0.3, size=(H // 8, W // 8))).astype(np.float32)
-    disparity[2, 3] = np.nan  # a masked tile: no contribution, its neighbours fade towards it
+    for tile in masked:  # a masked tile: no contribution, its neighbours fade towards it
+        disparity[tile] = np.nan
     config = TextureConfig(diff_sigma=diff_sigma)
     tp = TileProcessor(H, W, cfa=cfa, textures=True, texture_config=config, device=device, backend=backend)
     out = tp.process(frames, disparity)
@@ -43,6 +43,22 @@ def test_texture_equals_reference(device, backend, cfa, diff_sigma):
     assert out.texture.shape == want.shape
     for channel in range(want.shape[0]):
         assert relative_error(out.texture[channel], want[channel]) <= 1e-5
+
+
+@pytest.mark.parametrize("cfa, diff_sigma", [("GRBG", 50.0), (None, 500.0)])
+def test_texture_equals_reference(device, backend, cfa, diff_sigma):
+    _check_against_reference(device, backend, cfa, diff_sigma, [(2, 3)])
+
+
+@pytest.mark.parametrize("rows", [1, 2, 4])
+def test_texture_in_bands_equals_reference(device, backend, rows, monkeypatch):
+    """The texture is made one band of tile rows at a time (Buffers.TEXTURE_BAND_ROWS, 16): with bands of 1, 2
+    and 4 rows (6 rows of tiles: 6, 3 and 2 bands, the last one short) it still equals the reference. Tiles
+    (2, 3), (3, 6) and (4, 1) sit on band edges with one contributing neighbour (the alpha fades towards it),
+    so a band that took the rows beyond its edges as contributing would differ (checked: it fails)."""
+    monkeypatch.setattr(buffers, "TEXTURE_BAND_ROWS", rows)
+    masked = [(2, 2), (2, 4), (1, 3), (3, 5), (3, 7), (4, 6), (4, 0), (4, 2), (3, 1)]
+    _check_against_reference(device, backend, "GRBG", 50.0, masked)
 
 
 def test_texture_alpha_drops_at_a_wrong_disparity(device, backend):

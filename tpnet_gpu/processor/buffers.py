@@ -48,15 +48,48 @@ class TileResult:
     texture: torch.Tensor | None
 
 
+# Tile rows of one texture band: the texture's per-camera scratch is 1 KiB per tile, camera and colour (pix and
+# cmp) - 1.9 GB for a 5 MPix quad frame at once, 0.18 GB per band of 16 rows; the combine step also runs on the
+# band's 2 halo rows (it reads the neighbours' ``finite`` for the alpha fade): +2/16 of that step.
+TEXTURE_BAND_ROWS = 16
+
+
+@dataclass(frozen=True)
+class TextureBand:
+    """Views of one band of tile rows ``[first, last)`` for the texture steps (all contiguous, made once).
+
+    ``clt``, ``finite``: the band's tiles; ``pix``, ``cmp``: their slots in the scratch (after the top halo row);
+    ``span_*``: the band with its halo rows (``span_rows`` rows of tiles: ``finite`` of the processor, the
+    scratch from its start), which the combine step reads and writes; ``part``: the band's rows of
+    ``span_rgba``; ``rgba``: the same tiles of ``tex_rgba``, where ``part`` is copied."""
+
+    first: int
+    last: int
+    span_rows: int
+    clt: wp.array
+    finite: wp.array
+    pix: wp.array
+    cmp: wp.array
+    span_finite: wp.array
+    span_pix: wp.array
+    span_cmp: wp.array
+    span_weights: wp.array
+    span_rgba: wp.array
+    part: wp.array
+    rgba: wp.array
+
+
 class Buffers:
     """Device arrays of one processor (Warp) with their torch views; see the module docstring.
 
     Per-frame arrays (shapes): ``frames`` (cams, H, W) input staging; ``padded`` (cams, H + 2 PAD, W + 2 PAD);
     ``disparity`` (tiles_y, tiles_x); ``centres`` (tiles, cams, 2); ``active``, ``all_active``, ``finite``,
     ``valid`` (tiles,) bool; ``clt`` (tiles * cams * colours * 4, 8, 8); ``corr`` (tiles * pairs, 15, 15);
-    ``layers`` (tiles, 4, 9, 9) or None. Texture (``textures=True``): ``tex_pix``, ``tex_cmp``
-    (tiles * cams * colours, 16, 16), ``tex_weights`` (tiles * cams, 16, 16), ``tex_rgba``
-    (tiles * (colours + 1), 16, 16) per-tile contributions, ``canvas`` (colours + 1, H + 8, W + 8).
+    ``layers`` (tiles, 4, 9, 9) or None. Texture (``textures=True``): ``tex_rgba`` (tiles * (colours + 1),
+    16, 16) per-tile contributions, ``canvas`` (colours + 1, H + 8, W + 8), and the scratch of one band of
+    ``TEXTURE_BAND_ROWS`` tile rows with a halo row above and below (span = (rows + 2) * tiles_x tiles):
+    ``tex_pix``, ``tex_cmp`` (span * cams * colours, 16, 16), ``tex_weights`` (span * cams, 16, 16),
+    ``tex_part`` (span * (colours + 1), 16, 16); ``texture_bands`` the views of each band (``TextureBand``).
     """
 
     def __init__(self, geo: Geometry, config: CorrelationConfig, texture_config: TextureConfig | None,
@@ -130,11 +163,16 @@ class Buffers:
 
     def _texture(self, geo: Geometry, tc: TextureConfig) -> torch.Tensor:
         """Texture buffers and tables; returns the image view ``(colours + 1, H, W)`` of the canvas."""
-        n = geo.tiles * geo.cams * geo.colours
         side = (TILE_SIZE, TILE_SIZE)
-        self.tex_pix, self.tex_cmp = self._zeros((n, *side)), self._zeros((n, *side))
-        self.tex_weights = self._zeros((geo.tiles * geo.cams, *side))
-        self.tex_rgba = self._zeros((geo.tiles * (geo.colours + 1), *side))
+        span = (min(TEXTURE_BAND_ROWS, geo.tiles_y) + 2) * geo.tiles_x
+        channels = geo.colours + 1
+        self.tex_pix = self._zeros((span * geo.cams * geo.colours, *side))
+        self.tex_cmp = self._zeros((span * geo.cams * geo.colours, *side))
+        self.tex_weights = self._zeros((span * geo.cams, *side))
+        self.tex_part = self._zeros((span * channels, *side))
+        self.tex_rgba = self._zeros((geo.tiles * channels, *side))
+        self.texture_bands = [self._band(geo, first, min(first + TEXTURE_BAND_ROWS, geo.tiles_y))
+                              for first in range(0, geo.tiles_y, TEXTURE_BAND_ROWS)]
         margin = TILE_STRIDE // 2  # tile (0, 0)'s window starts 4 px before the frame
         self.canvas = self._zeros((geo.colours + 1, geo.height + 2 * margin, geo.width + 2 * margin))
         up = self.upload
@@ -148,3 +186,22 @@ class Buffers:
         self.channel_of_colour = up([0, 2, 1] if geo.colours == 3 else [0], wp.int32)
         self.canvas_t = wp.to_torch(self.canvas)
         return self.canvas_t[:, margin : margin + geo.height, margin : margin + geo.width]
+
+    def _band(self, geo: Geometry, first: int, last: int) -> TextureBand:
+        """The views of tile rows ``[first, last)`` with a halo row on each side inside the frame."""
+        top, bottom = max(first - 1, 0), min(last + 1, geo.tiles_y)
+        tx, per_tile, channels = geo.tiles_x, geo.cams * geo.colours, geo.colours + 1
+        inner, span, skip = (last - first) * tx, (bottom - top) * tx, (first - top) * tx  # tiles
+        start = first * tx
+        return TextureBand(
+            first=first, last=last, span_rows=bottom - top,
+            clt=self.clt[start * per_tile * 4 : (start + inner) * per_tile * 4],
+            finite=self.finite[start : start + inner],
+            pix=self.tex_pix[skip * per_tile : (skip + inner) * per_tile],
+            cmp=self.tex_cmp[skip * per_tile : (skip + inner) * per_tile],
+            span_finite=self.finite[top * tx : top * tx + span],
+            span_pix=self.tex_pix[: span * per_tile], span_cmp=self.tex_cmp[: span * per_tile],
+            span_weights=self.tex_weights[: span * geo.cams], span_rgba=self.tex_part[: span * channels],
+            part=self.tex_part[skip * channels : (skip + inner) * channels],
+            rgba=self.tex_rgba[start * channels : (start + inner) * channels],
+        )

@@ -92,7 +92,10 @@ class WarpBackend:
         wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=self.device, block_dim=self.block_dim)
 
     def _tile_launch(self, kernel, inputs, outputs) -> None:
-        wp.launch_tiled(kernel, dim=[self.geo.tiles], inputs=inputs, outputs=outputs, block_dim=self.block_dim,
+        self._tile_launch_n(kernel, self.geo.tiles, inputs, outputs)
+
+    def _tile_launch_n(self, kernel, tiles: int, inputs, outputs) -> None:
+        wp.launch_tiled(kernel, dim=[tiles], inputs=inputs, outputs=outputs, block_dim=self.block_dim,
                         device=self.device)
 
     def _pad(self, frames_t: torch.Tensor | None) -> None:
@@ -128,19 +131,24 @@ class WarpBackend:
 
     def _texture(self) -> None:
         b, geo, tc = self.b, self.geo, self.texture_config
-        self._tile_launch(
-            texture.texture_imclt,
-            [b.clt, b.finite, geo.cams, geo.colours, b.tex_lpf, b.inv_cos, b.inv_sin, b.inv_cos_t, b.inv_sin_t],
-            [b.tex_pix],
-        )
-        self._thread_launch(texture.texture_demosaic, b.tex_pix.shape,
-                            [b.tex_pix, b.finite, geo.cams, geo.colours, tc.scale_shot, tc.min_shot], [b.tex_cmp])
-        self._thread_launch(
-            texture.texture_combine, (geo.tiles, *b.tex_pix.shape[1:]),
-            [b.tex_pix, b.tex_cmp, b.finite, geo.tiles_x, geo.tiles_y, geo.cams, geo.colours, b.offsets,
-             b.tex_weights_c, b.channel_of_colour, tc.diff_sigma, tables.TEXTURE_WEIGHT_FLOOR, tc.dust_remove,
-             tc.output_gain],
-            [b.tex_weights, b.tex_rgba],
-        )
+        for band in b.texture_bands:  # one band of tile rows at a time through the scratch (Buffers)
+            tiles, span = band.finite.shape[0], band.span_finite.shape[0]
+            self._tile_launch_n(
+                texture.texture_imclt, tiles,
+                [band.clt, band.finite, geo.cams, geo.colours, b.tex_lpf, b.inv_cos, b.inv_sin, b.inv_cos_t,
+                 b.inv_sin_t],
+                [band.pix],
+            )
+            self._thread_launch(texture.texture_demosaic, band.pix.shape,
+                                [band.pix, band.finite, geo.cams, geo.colours, tc.scale_shot, tc.min_shot],
+                                [band.cmp])
+            self._thread_launch(
+                texture.texture_combine, (span, *b.tex_pix.shape[1:]),
+                [band.span_pix, band.span_cmp, band.span_finite, geo.tiles_x, band.span_rows, geo.cams,
+                 geo.colours, b.offsets, b.tex_weights_c, b.channel_of_colour, tc.diff_sigma,
+                 tables.TEXTURE_WEIGHT_FLOOR, tc.dust_remove, tc.output_gain],
+                [band.span_weights, band.span_rgba],
+            )
+            wp.copy(band.rgba, band.part)
         self._thread_launch(texture.overlap_add, b.canvas.shape, [b.tex_rgba, b.finite, geo.tiles_x, geo.tiles_y],
                             [b.canvas])
