@@ -120,21 +120,21 @@ class DisparityEngine:
             volume.add(t, self.offsets, combine_pairs(self.sampler.sample(corr, self.offsets)), self.config.reach,
                        tiles)
 
-    def set_targets(self, tp: TileProcessor, target: torch.Tensor, active=None) -> None:
-        """Targets ``(ty, tx)`` into ``tp``: a calibrated rig's tile centres at full resolution (the rig's model
-        is NumPy: a host round trip), the ideal geometry's disparities otherwise (and at the binned level)."""
+    def _targets(self, tp: TileProcessor, target: torch.Tensor) -> dict:
+        """``tp``'s target arguments for ``target (ty, tx)``: a calibrated rig's tile centres at full resolution
+        (the rig's model is NumPy: a host round trip), the ideal geometry's disparities otherwise."""
         if tp.height == self.rig.height and self.calibrated:
-            centres = self.rig.tile_centres(target.detach().cpu().numpy().astype(np.float64)).astype(np.float32)
-            tp.set_targets(centres=centres, active=active)
-        else:
-            tp.set_targets(target, active=active)
+            return {"centres": self.rig.tile_centres(target.detach().cpu().numpy().astype(np.float64))
+                    .astype(np.float32)}
+        return {"target_disparity": target}
+
+    def set_targets(self, tp: TileProcessor, target: torch.Tensor, active=None) -> None:
+        """Targets ``(ty, tx)`` into ``tp`` (for a stage run separately, e.g. the texture)."""
+        tp.set_targets(**self._targets(tp, target), active=active)
 
     def measure_at(self, tp: TileProcessor, target: torch.Tensor, active=None):
-        """Convert and correlate ``tp``'s loaded frame at ``target``; returns its ``TileResult``."""
-        self.set_targets(tp, target, active)
-        tp.convert()
-        tp.correlate()
-        return tp.result
+        """Convert and correlate ``tp``'s loaded frame at ``target`` (``tp.measure``); returns its ``TileResult``."""
+        return tp.measure(**self._targets(tp, target), active=active)
 
     def _choose(self, volume: CostVolume) -> tuple[torch.Tensor, torch.Tensor]:
         return pick(aggregate(volume.cost(), self.config.p1, self.config.p2), volume.disparities, volume.step)
