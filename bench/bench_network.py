@@ -94,7 +94,7 @@ def main(argv=None) -> dict:
             start = time.perf_counter()
             result = engine.run(frames)
             estimates[name] = result.disparity.cpu().numpy().astype(np.float64)
-            confidences[name] = result.strength.cpu().numpy().astype(np.float64)
+            confidences[name] = result.confidence.cpu().numpy().astype(np.float64)
             costs[name] = {"seconds": time.perf_counter() - start, "tile_passes": result.tile_passes}
         # TPNET reads the layers at the engine's disparities (its first stage's answer where it measured none)
         measured = torch.isfinite(result.disparity)

@@ -43,7 +43,10 @@ class FrameResult:
     Attributes:
         disparity: ``(tiles_y, tiles_x)`` final disparity, px (TPNET's for the quad, else the engine's); NaN
             where the engine trusted no measurement.
-        confidence: ``(tiles_y, tiles_x)`` strength of the engine's final correlation peak, 0 = none.
+        confidence: ``(tiles_y, tiles_x)`` the engine's confidence (its final correlation peak's strength,
+            scaled down on two-depth tiles; higher = surer), 0 = none.
+        two_depth: ``(tiles_y, tiles_x)`` bool: the tile's window straddles two depths (its neighbours'
+            disparities span more than 1 px): flagged, not a surface to trust (engine.two_depth).
         initial: ``(tiles_y, tiles_x)`` the engine's disparities the network read its layers at (NaN = none).
         search: ``(tiles_y, tiles_x)`` the engine's first-stage answer (finite everywhere): where ``initial`` is
             NaN the network and the texture read the tile there.
@@ -54,6 +57,7 @@ class FrameResult:
 
     disparity: torch.Tensor
     confidence: torch.Tensor
+    two_depth: torch.Tensor
     initial: torch.Tensor
     valid: torch.Tensor
     texture: torch.Tensor | None
@@ -126,8 +130,8 @@ class Pipeline:
             tp.texture()
             texture = tp.result.texture
             texture[:-1] /= self.engine.scale  # colours back in the frames' units (alpha is unitless)
-        confidence = torch.where(measured, result.strength, torch.zeros_like(result.strength))
-        return FrameResult(disparity, confidence, initial, tp.result.valid.view(self.grid), texture, result.search,
+        confidence = torch.where(measured, result.confidence, torch.zeros_like(result.confidence))
+        return FrameResult(disparity, confidence, result.two_depth, initial, tp.result.valid.view(self.grid), texture, result.search,
                            result.tile_passes)
 
     def stream(self, frames: Iterable) -> Iterator[FrameResult]:
