@@ -14,7 +14,7 @@ Start-up (docs/platform.md §4): Taichi 1.7's offline cache keeps each kernel's 
 IR, so every process still turns each kernel's Python source into IR (the front end) before it finds its cached
 code. Two parts of that front end cost more than the rest together and do not change the IR, so
 ``quick_front_end`` (applied on import) replaces them: the source position written for every AST node (line-wrapped
-with a caret hint: 70% of the front end; the kernel's file, line and source line are kept, the format Taichi itself
+with a caret hint: ~60% of the front end; the kernel's file, line and source line are kept, the format Taichi itself
 uses on Python < 3.8), and the class-body test of every ``@ti.kernel`` / ``@ti.func`` decorator (it searched all
 of ``sys.modules`` for the caller's source file; the line is read from ``linecache``). Debug mode keeps Taichi's
 own positions (for the best bounds-check messages).
