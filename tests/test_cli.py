@@ -35,8 +35,10 @@ def test_process_scene_folder_and_bad_inputs(tmp_path, capsys):
                  "--backend", "warp"]) == 0
     disparity = tifffile.imread(tmp_path / "o" / "disparity.tif")
     assert disparity.shape == (8, 12) and np.isfinite(disparity).any()
-    # The Taichi backend (the CPU default) gives the same disparities (same math; float32 rounding differs).
-    assert main(["process", str(tmp_path / "s"), "--out", str(tmp_path / "t"), "--device", "cpu"]) == 0
+    # The Taichi backend (the CPU default above SMALL_FRAME_PIXELS) gives the same disparities (same math;
+    # float32 rounding differs).
+    assert main(["process", str(tmp_path / "s"), "--out", str(tmp_path / "t"), "--device", "cpu",
+                 "--backend", "taichi"]) == 0
     np.testing.assert_allclose(tifffile.imread(tmp_path / "t" / "disparity.tif"), disparity, atol=1e-3)
     assert (tmp_path / "o" / "texture.png").exists()
     # The same frames as 4 raw files (the quad without a folder): the same disparities.
@@ -83,6 +85,7 @@ class RecordingEngine:
 
     def process(self, frames):
         self.calls[-1]["frames"] = np.array(frames)
+        self.calls[-1]["torch_threads"] = torch.get_num_threads()
         h, w = self.shape
         tiles = torch.arange(h // 8 * (w // 8), dtype=torch.float32).reshape(h // 8, w // 8)
         texture = torch.arange(4 * h * w, dtype=torch.float32).reshape(4, h, w)
@@ -124,6 +127,22 @@ def test_process_pair_through_the_engine_crops_to_the_image(tmp_path, engine, ca
     np.testing.assert_array_equal(texture, np.arange(4 * 16 * 24, dtype=np.float32).reshape(4, 16, 24)[:, :8, :20])
     assert Image.open(out / "disparity.png").size == (20, 8) and Image.open(out / "texture.png").size == (20, 8)
     assert "stereo pair" in capsys.readouterr().out
+
+
+def test_one_shot_backend_and_threads_follow_the_frame_size(tmp_path, engine):
+    # docs/platform.md §4: without --backend a frame of at most SMALL_FRAME_PIXELS (320x240) runs on Warp with
+    # torch on one thread, a larger one on the library default (None); --backend wins; torch's count is restored.
+    from tpnet_gpu.cli import SMALL_FRAME_PIXELS
+
+    assert SMALL_FRAME_PIXELS == 320 * 240
+    threads = torch.get_num_threads()
+    (tmp_path / "big").mkdir()
+    small, big = _pair(tmp_path, (240, 320)), _pair(tmp_path / "big", (240, 328))
+    for images, backend in ((small, []), (big, []), (small, ["--backend", "taichi"])):
+        assert main(["process", *images, "--max-disparity", "4", "--out", str(tmp_path / "o"), *backend]) == 0
+    assert [(c["height"] * c["width"], c["backend"]) for c in engine] == [(76800, "warp"), (78720, None),
+                                                                          (76800, "taichi")]
+    assert [c["torch_threads"] for c in engine] == [1, threads, 1] and torch.get_num_threads() == threads
 
 
 def test_process_rig_of_images_through_the_engine(tmp_path, engine):

@@ -4,16 +4,40 @@ traceback (exit status 2)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import sys
 import time
+
+# A one-shot run of a frame of at most this many pixels is start-up bound (docs/platform.md §4): the Warp backend
+# starts ~1 CPU-second sooner than Taichi and runs such a frame as fast, and torch's second thread only waits.
+SMALL_FRAME_PIXELS = 320 * 240
+
+
+@contextlib.contextmanager
+def _one_shot(height: int, width: int, backend: str | None):
+    """The backend for one frame of ``height`` x ``width`` (``backend`` if given; "warp" for a small frame; else
+    None, the library's default) and, for a small frame, torch on one thread while it runs (restored after)."""
+    if height * width > SMALL_FRAME_PIXELS:
+        yield backend
+        return
+    import torch  # noqa: PLC0415 - the pipeline imports it anyway
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield backend or "warp"
+    finally:
+        torch.set_num_threads(threads)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     from tpnet_gpu.demo import run_demo
 
-    print(run_demo(args.out, width=args.width, height=args.height, seed=args.seed, device=args.device,
-                   backend=args.backend)["text"])
+    with _one_shot(args.height, args.width, args.backend) as backend:
+        report = run_demo(args.out, width=args.width, height=args.height, seed=args.seed, device=args.device,
+                          backend=backend)
+    print(report["text"])
     return 0
 
 
@@ -50,9 +74,10 @@ def _cmd_process(args: argparse.Namespace) -> int:
     frames = inputs.frames
     (height, width), (h, w) = frames.padded, frames.size
     start = time.perf_counter()
-    pipeline = make_pipeline(height, width, cfa=frames.cfa, rig=inputs.rig, min_disparity=min_d, max_disparity=max_d,
-                             device=args.device, backend=args.backend)
-    result = pipeline.process(frames.frames)
+    with _one_shot(height, width, args.backend) as backend:
+        pipeline = make_pipeline(height, width, cfa=frames.cfa, rig=inputs.rig, min_disparity=min_d,
+                                 max_disparity=max_d, device=args.device, backend=backend)
+        result = pipeline.process(frames.frames)
     seconds = time.perf_counter() - start
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -142,7 +167,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-BENCHES = ("tp", "accuracy", "network", "throughput")
+BACKEND_HELP = (f"tile-processor kernels (default: warp for frames of at most {SMALL_FRAME_PIXELS} pixels, whose "
+                "start-up dominates; else taichi on the CPU, warp on CUDA)")
+BENCHES = ("tp", "accuracy", "network", "throughput", "startup")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -168,8 +195,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--height", type=int, default=480, help="frame height, pixels (multiple of 8)")
     demo.add_argument("--seed", type=int, default=0, help="seed of the scene and the noise")
     demo.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
-    demo.add_argument("--backend", choices=BACKENDS, default=None,
-                      help="tile-processor kernels (default: taichi on the CPU, warp on CUDA)")
+    demo.add_argument("--backend", choices=BACKENDS, default=None, help=BACKEND_HELP)
     demo.set_defaults(func=_cmd_demo)
 
     proc = sub.add_parser("process", help="disparity, confidence and texture of a frame: scene folder, raw quad, "
@@ -195,8 +221,7 @@ def build_parser() -> argparse.ArgumentParser:
     proc.add_argument("--cfa", default=None, help="Bayer pattern of TIFF mosaics (e.g. GRBG); without it TIFFs of a "
                       "rig are read as ordinary images")
     proc.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
-    proc.add_argument("--backend", choices=BACKENDS, default=None,
-                      help="tile-processor kernels (default: taichi on the CPU, warp on CUDA)")
+    proc.add_argument("--backend", choices=BACKENDS, default=None, help=BACKEND_HELP)
     proc.set_defaults(func=_cmd_process)
 
     rend = sub.add_parser("render", help="render a synthetic quad-camera scene folder (DNGs + ground truth)")

@@ -9,13 +9,24 @@ offline cache reloads in milliseconds; ``use_arch`` does that when processors of
 * CPU threads: the ``threads`` argument of the first ``init_taichi``, else ``$TPNET_TAICHI_THREADS``, else every
   core (``os.cpu_count()``).
 * ``TPNET_TAICHI_DEBUG=1``: Taichi's debug mode (bounds checks on every array access; slow; for tests).
+
+Start-up (docs/platform.md §4): Taichi 1.7's offline cache keeps each kernel's compiled code keyed by its
+IR, so every process still turns each kernel's Python source into IR (the front end) before it finds its cached
+code. Two parts of that front end cost more than the rest together and do not change the IR, so
+``quick_front_end`` (applied on import) replaces them: the source position written for every AST node (line-wrapped
+with a caret hint: ~60% of the front end; the kernel's file, line and source line are kept, the format Taichi itself
+uses on Python < 3.8), and the class-body test of every ``@ti.kernel`` / ``@ti.func`` decorator (it searched all
+of ``sys.modules`` for the caller's source file; the line is read from ``linecache``). Debug mode keeps Taichi's
+own positions (for the best bounds-check messages).
 """
 
 from __future__ import annotations
 
 import contextlib
 import io
+import linecache
 import os
+import sys
 import threading
 import warnings
 from pathlib import Path
@@ -31,6 +42,48 @@ os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 with warnings.catch_warnings():  # Taichi 1.7 calls the deprecated locale.getdefaultlocale on import
     warnings.simplefilter("ignore", DeprecationWarning)
     import taichi as ti  # noqa: E402
+
+FRONT_END_VERSIONS = ((1, 7),)  # Taichi versions whose front-end internals quick_front_end replaces
+
+
+def _debug() -> bool:
+    return os.environ.get(DEBUG_ENV, "0") not in ("", "0")
+
+
+def _position(ctx, node) -> str:
+    """A node's source position, as Taichi's ``ASTTransformerContext.get_pos_info`` without the caret hint."""
+    return (f'File "{ctx.file}", line {node.lineno + ctx.lineno_offset}, in {ctx.func.func.__name__}:\n'
+            f"{ctx.src[node.lineno - 1]}\n")
+
+
+def _inside_class(level_of_class_stackframe: int) -> bool:
+    """Taichi's ``kernel_impl._inside_class``: whether the decorated function is defined in a class body (the
+    caller's line starts with ``class`` or ``@data_oriented``), read from ``linecache``."""
+    from taichi.lang import kernel_impl  # noqa: PLC0415 - loaded with taichi
+
+    try:
+        frame = sys._getframe(level_of_class_stackframe)  # called where Taichi's own is: the same frame
+    except ValueError:
+        return False
+    line = linecache.getline(frame.f_code.co_filename, frame.f_lineno).strip()
+    return any(pattern.match(line) for pattern in kernel_impl._KERNEL_CLASS_STACKFRAME_STMT_RES)
+
+
+def quick_front_end() -> bool:
+    """Replace the two slow, IR-neutral parts of Taichi's kernel front end (module docstring); True if replaced
+    (only Taichi versions of ``FRONT_END_VERSIONS``; the positions only outside debug mode)."""
+    if tuple(ti.__version__[:2]) not in FRONT_END_VERSIONS:
+        return False
+    from taichi.lang import kernel_impl  # noqa: PLC0415 - loaded with taichi
+    from taichi.lang.ast import ast_transformer_utils  # noqa: PLC0415
+
+    kernel_impl._inside_class = _inside_class
+    if not _debug():
+        ast_transformer_utils.ASTTransformerContext.get_pos_info = _position
+    return True
+
+
+quick_front_end()
 
 _lock = threading.RLock()
 _state: dict = {"arch": None, "threads": None}
@@ -86,7 +139,7 @@ def init_taichi(arch: str = "cpu", threads: int | None = None) -> None:
                 log_level=ti.WARN,
                 default_fp=ti.f32,
                 default_ip=ti.i32,
-                debug=os.environ.get(DEBUG_ENV, "0") not in ("", "0"),
+                debug=_debug(),
             )
         _touch()  # materialises the runtime on this thread: Taichi aborts when a worker thread does it first
         _state.update(arch=arch, threads=count)

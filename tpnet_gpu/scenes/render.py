@@ -14,7 +14,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from tpnet_gpu import tables
 from tpnet_gpu.camera import Rig
@@ -121,6 +120,8 @@ def _radiance(scene: Scene, rig: Rig, cam: int, supersample: int) -> np.ndarray:
 
 def apply_optics(planes: np.ndarray, optics: Optics, principal: np.ndarray) -> np.ndarray:
     """Lateral CA (radial magnification of R outward, B inward) then the field-dependent blur, ``(3, H, W)``."""
+    from scipy import ndimage  # noqa: PLC0415 - on use: reading a scene folder needs no renderer (start-up)
+
     _, height, width = planes.shape
     y, x = np.mgrid[0:height, 0:width].astype(np.float64) + 0.5
     dx, dy = x - principal[0], y - principal[1]
