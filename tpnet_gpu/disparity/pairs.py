@@ -73,9 +73,8 @@ COMBINE_OFFSET = 0.03
 def combine_pairs(values: torch.Tensor, offset: float = COMBINE_OFFSET) -> torch.Tensor:
     """``(T, E)``: geometric mean over pairs of max(value + offset, 0), minus ``offset`` (the pairs must agree:
     a false peak of one direction is suppressed by the others); NaN pairs are left out, all-NaN gives NaN."""
-    finite = torch.isfinite(values)
-    logs = torch.log(torch.clamp(torch.where(finite, values, torch.zeros_like(values)) + offset, min=1e-6))
-    count = finite.sum(dim=1)
-    mean = torch.where(finite, logs, torch.zeros_like(logs)).sum(dim=1) / count.clamp(min=1)
-    out = torch.exp(mean) - offset
+    count = torch.isfinite(values).sum(dim=1)
+    # a NaN pair contributes log(1) = 0 to the sum; one temporary, the rest in place (this runs on every pass)
+    logs = torch.nan_to_num(values, nan=1.0 - offset).add_(offset).clamp_(min=1e-6).log_()
+    out = torch.exp(logs.sum(dim=1) / count.clamp(min=1)) - offset
     return torch.where(count > 0, out, torch.full_like(out, float("nan")))
