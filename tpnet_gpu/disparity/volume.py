@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import torch
 
-DIRECTIONS = ((0, 1), (1, 0), (0, -1), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1))  # (dy, dx)
 
 
 class CostVolume:
@@ -52,55 +51,40 @@ class CostVolume:
         return torch.where(torch.isfinite(v), v, torch.full_like(v, float("nan")))
 
 
-def _path_costs(cost: torch.Tensor, dy: int, dx: int, p1: float, p2: float) -> torch.Tensor:
-    """SGM along one direction: L(p, d) = C(p, d) + min(L(q, d), L(q, d +- 1) + p1, min L(q) + p2) - min L(q),
-    q = p - (dy, dx); ``cost (H, W, D)``."""
-    height, width, _ = cost.shape
-    out = torch.empty_like(cost)
-    # walk the grid in the direction's order, one line of tiles at a time (rows for dy != 0, else columns)
-    if dy != 0:
-        order = range(height) if dy > 0 else range(height - 1, -1, -1)
-        prev = None
-        for y in order:
-            c = cost[y]
-            if prev is None:
-                out[y] = c
+def _walk(cost: torch.Tensor, total: torch.Tensor, dxs: tuple[int, ...], p1: float, p2: float) -> None:
+    """Add to ``total`` the SGM path costs L(p, d) = C(p, d) + min(L(q, d), L(q, d +- 1) + p1, min L(q) + p2)
+    - min L(q) of the directions (dy, dx) = (+-1, dx) for each dx in ``dxs``, q = p - (dy, dx); ``cost`` and
+    ``total`` ``(H, W, D)``. All of them walk the rows together (the dy = -1 ones from the last row): one python
+    step per row, not per row and direction."""
+    height, width, bins = cost.shape
+    prev = cost.new_full((2, len(dxs), width, bins), float("inf"))  # (down|up, direction, W, D): L(q), inf = none
+    padded = cost.new_full((2, len(dxs), width, bins + 2), float("inf"))  # L(q) with inf beyond the bins
+    body = padded[..., 1:-1]
+    for i in range(height):
+        for n, dx in enumerate(dxs):  # L(q) at x - dx (the column that falls off stays inf: no predecessor)
+            if dx > 0:
+                body[:, n, 1:] = prev[:, n, :-1]
+            elif dx < 0:
+                body[:, n, :-1] = prev[:, n, 1:]
             else:
-                shifted = torch.full_like(prev, float("inf"))
-                if dx > 0:
-                    shifted[1:] = prev[:-1]
-                elif dx < 0:
-                    shifted[:-1] = prev[1:]
-                else:
-                    shifted = prev
-                out[y] = c + _step(shifted, p1, p2)
-            prev = out[y]
-    else:
-        order = range(width) if dx > 0 else range(width - 1, -1, -1)
-        prev = None
-        for x in order:
-            c = cost[:, x]
-            out[:, x] = c if prev is None else c + _step(prev, p1, p2)
-            prev = out[:, x]
-    return out
+                body[:, n] = prev[:, n]
+        low = body.amin(dim=-1, keepdim=True)
+        finite = torch.isfinite(low)
+        low = torch.where(finite, low, torch.zeros_like(low))
+        best = torch.minimum(torch.minimum(body, torch.minimum(padded[..., 2:], padded[..., :-2]) + p1), low + p2)
+        best = torch.where(finite, best - low, torch.zeros_like(best))
+        rows = (i, height - 1 - i)
+        prev = torch.stack((cost[rows[0]], cost[rows[1]]))[:, None] + best
+        total[rows[0]] += prev[0].sum(dim=0)
+        total[rows[1]] += prev[1].sum(dim=0)
 
 
-def _step(prev: torch.Tensor, p1: float, p2: float) -> torch.Tensor:
-    """min(L(d), L(d +- 1) + p1, min L + p2) - min L over a line of tiles ``(N, D)`` (inf where no tile)."""
-    low = torch.amin(prev, dim=-1, keepdim=True)
-    finite = torch.isfinite(low)
-    low0 = torch.where(finite, low, torch.zeros_like(low))
-    up = torch.cat([prev[:, 1:], torch.full_like(prev[:, :1], float("inf"))], dim=-1)
-    down = torch.cat([torch.full_like(prev[:, :1], float("inf")), prev[:, :-1]], dim=-1)
-    best = torch.minimum(torch.minimum(prev, torch.minimum(up, down) + p1), low0 + p2)
-    return torch.where(finite, best - low0, torch.zeros_like(best))
-
-
-def aggregate(cost: torch.Tensor, p1: float, p2: float, directions=DIRECTIONS) -> torch.Tensor:
-    """Sum of the SGM path costs ``(H, W, D)`` over ``directions``."""
+def aggregate(cost: torch.Tensor, p1: float, p2: float) -> torch.Tensor:
+    """Sum ``(H, W, D)`` of the SGM path costs of ``cost (H, W, D)`` along the 8 grid directions: the 6 with a
+    vertical step walk the rows, the 2 horizontal ones the rows of the transposed grid."""
     total = torch.zeros_like(cost)
-    for dy, dx in directions:
-        total += _path_costs(cost, dy, dx, p1, p2)
+    _walk(cost, total, (-1, 0, 1), p1, p2)
+    _walk(cost.transpose(0, 1).contiguous(), total.transpose(0, 1), (0,), p1, p2)
     return total
 
 
