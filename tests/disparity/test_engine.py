@@ -50,6 +50,18 @@ def test_engine_finds_the_rendered_disparity(name, max_gross, max_rmse):
     assert 0 < result.tile_passes <= BUDGET
 
 
+def test_engine_in_chunks_of_tiles(monkeypatch):
+    """The passes' correlations read a few tiles at a time (as a 5 MPix frame is): the same ground-truth bounds
+    on the quad (chunks of 97 tiles: every pass spans many, the last one partial)."""
+    from tpnet_gpu.disparity import engine, measure  # noqa: PLC0415
+
+    monkeypatch.setattr(engine, "CHUNK", 97)
+    monkeypatch.setattr(measure, "CHUNK", 97)
+    rendered, result = run(RIGS["quad"])
+    stats = flat_stats(rendered, result.disparity)
+    assert stats["coverage"] >= 0.95 and stats["gross"] <= 0.03 and stats["rmse_inliers"] <= 0.16, stats
+
+
 @pytest.mark.slow
 def test_calibrated_rig_corrects_distortion_and_misalignment():
     """The rig's model (tile centres per camera) against the ideal geometry on the same frames: measured

@@ -20,7 +20,7 @@ import torch
 from tpnet_gpu import tables
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig
-from tpnet_gpu.disparity.measure import Measurer
+from tpnet_gpu.disparity.measure import CHUNK, Measurer
 from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs
 from tpnet_gpu.disparity.volume import CostVolume, aggregate, pick
 from tpnet_gpu.processor import TileProcessor
@@ -123,6 +123,7 @@ class DisparityEngine:
         self.calibrated = not self.rig.is_ideal()
         self.sparse_tiles = torch.zeros(self.grid, dtype=torch.bool, device=self.device)
         self.sparse_tiles[::SPARSE, ::SPARSE] = True
+        self.all_tiles = torch.arange(self.tp.tiles, device=self.device)
         self.sparse_index = torch.nonzero(self.sparse_tiles.reshape(-1))[:, 0]  # (sparse tiles,) flat numbers
         self.sparse_grid = tuple((n + SPARSE - 1) // SPARSE for n in self.grid)
         self.sparse_share = float(self.sparse_tiles.float().mean())
@@ -137,16 +138,14 @@ class DisparityEngine:
         """Measure the loaded frame at each target (uniform numbers or ``(ty, tx)`` tensors) into ``volume``
         (only the ``active`` tiles, when a mask is given: only their correlations are read, a sparse pass
         costs its share of the tiles here as in the processor)."""
-        tiles = None if active is None else (
+        tiles = self.all_tiles if active is None else (
             self.sparse_index if active is self.sparse_tiles else torch.nonzero(active.reshape(-1))[:, 0])
         for target in targets:
             t = target if isinstance(target, torch.Tensor) else self._uniform.fill_(float(target))
             corr = self.measure_at(tp, t, active=active).corr
-            t = t.reshape(-1)
-            if tiles is not None:
-                corr, t = corr.index_select(0, tiles), t.index_select(0, tiles)
-            volume.add(t, self.offsets, combine_pairs(self.sampler.sample(corr, self.offsets)), self.config.reach,
-                       tiles)
+            for part in tiles.split(CHUNK):
+                combined = combine_pairs(self.sampler.sample(corr.index_select(0, part), self.offsets))
+                volume.add(t.reshape(-1).index_select(0, part), self.offsets, combined, self.config.reach, part)
 
     def _targets(self, tp: TileProcessor, target: torch.Tensor) -> dict:
         """``tp``'s target arguments for ``target (ty, tx)``: a calibrated rig's tile centres at full resolution

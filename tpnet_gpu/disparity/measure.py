@@ -19,6 +19,9 @@ from tpnet_gpu.config import EngineConfig
 from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs
 
 PEAK_OFFSETS = 0.25  # px between the offsets the generic peak is read at
+# Tiles read per step after a pass (here and in the engine's sweeps): bounds the temporaries - at 5 MPix a
+# pass's (tiles, pairs, lags) samples would be ~0.2 GB at once, a copy of the active correlations up to 0.4 GB.
+CHUNK = 8192
 
 
 WIDEN_SIGMA = 0.9  # px: Gaussian blur of mono correlations before the peak is located
@@ -58,17 +61,15 @@ class Measurer:
         tiles = corr.shape[0]
         residual = torch.full((tiles,), float("nan"), device=corr.device)
         strength = torch.zeros((tiles,), device=corr.device)
-        index = torch.nonzero(active, as_tuple=True)[0]
-        if index.numel() == 0:
-            return residual, strength
-        sub = corr[index]
-        if self.lma:  # the LMA runs in float64 NumPy (a host round trip of the active tiles)
-            m = lma_measure(sub.detach().cpu().numpy(), self.params)
-            residual[index] = torch.as_tensor(m.residual, dtype=torch.float32, device=corr.device)
-            strength[index] = torch.as_tensor(m.strength, dtype=torch.float32, device=corr.device)
-            return residual, strength
-        d, s = self._peak(sub)
-        residual[index], strength[index] = d, s
+        for index in torch.nonzero(active, as_tuple=True)[0].split(CHUNK):  # bounded temporaries
+            sub = corr.index_select(0, index)
+            if self.lma:  # the LMA runs in float64 NumPy (a host round trip of the active tiles)
+                m = lma_measure(sub.detach().cpu().numpy(), self.params)
+                d = torch.as_tensor(m.residual, dtype=torch.float32, device=corr.device)
+                s = torch.as_tensor(m.strength, dtype=torch.float32, device=corr.device)
+            else:
+                d, s = self._peak(sub)
+            residual[index], strength[index] = d, s
         return residual, strength
 
     def _peak(self, corr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
