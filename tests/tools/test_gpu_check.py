@@ -49,10 +49,11 @@ def test_dry_run_with_a_sanitizer(tmp_path):
     fake = bin_dir / "compute-sanitizer"
     fake.write_text(FAKE_SANITIZER)
     fake.chmod(0o755)
-    done, report = _run(["--dry-run", "--steps", "env,tp,memcheck"], tmp_path, bin_dir)
+    done, report = _run(["--dry-run", "--steps", "env,compile,tp,memcheck"], tmp_path, bin_dir)
     assert done.returncode == 0, done.stderr[-2000:]
     steps = report["steps"]
-    assert list(steps) == ["env", "tp", "memcheck"] and all(s["ok"] is True for s in steps.values())
+    assert list(steps) == ["env", "compile", "tp", "memcheck"] and all(s["ok"] is True for s in steps.values())
+    assert len(steps["compile"]["compile_s"]) == 4  # frames, convert, correlate, texture
     assert set(steps["tp"]["runs"]) == {"64x48_graph_off", "64x48_graph_on"}
     assert all(r["process_ms"]["median"] > 0 and len(r["measure_ms"]["runs"]) == 2 for r in steps["tp"]["runs"].values())
     assert steps["memcheck"]["summary"] == ["========= ERROR SUMMARY: 0 errors"]

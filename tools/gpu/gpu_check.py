@@ -3,10 +3,12 @@
     python tools/gpu/gpu_check.py --out DIR [--budget-s 480] [--steps a,b,...]     # on the GPU machine (gpu_check.sh)
     python tools/gpu/gpu_check.py --out DIR --dry-run                             # here: the CPU, tiny sizes
 
-Steps, in this order (the most telling first; each in its own try, time-boxed, skipped once the budget is spent;
+Runner (this file) and steps (gpu_steps.py). Steps, in this order (the most telling first; each in its own try, time-boxed, skipped once the budget is spent;
 the JSON is rewritten after every step, so a killed run still leaves what it did):
 
 * ``env``: device, driver, versions.
+* ``compile``: every Warp kernel module the processor loads (``warp_backend.KERNEL_MODULES``), each built in its
+  own process at the launch block size, in parallel, into the shared Warp kernel cache; then loaded here from it.
 * ``tp``: ``TileProcessor.process`` (load + convert + correlate + texture) and ``measure`` (one pass: centres +
   convert + correlate) at 640x480 and 2592x1936, graph capture off and on: build, first call (compile / record),
   median of --repeat (10) after that warm-up, peak device memory.
@@ -31,23 +33,21 @@ import argparse
 import contextlib
 import json
 import os
-import platform
-import shutil
 import signal
-import statistics
-import subprocess
 import sys
 import time
 import traceback
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]  # the project root (tests/ lives there)
-STEPS = ("env", "tp", "pipeline_640x480", "determinism", "tests", "pipeline_2592x1936", "memcheck", "racecheck")
-BOXES = {"env": 30, "tp": 120, "pipeline_640x480": 90, "determinism": 60, "tests": 150, "pipeline_2592x1936": 150,
-         "memcheck": 90, "racecheck": 90}  # seconds each step may take at most
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # gpu_steps.py beside this file, however it is loaded
+import gpu_steps as gs  # noqa: E402
+from gpu_steps import log  # noqa: E402
+
+STEPS = ("env", "compile", "tp", "pipeline_640x480", "determinism", "tests", "pipeline_2592x1936", "memcheck",
+         "racecheck")
+BOXES = {"env": 30, "compile": 240, "tp": 120, "pipeline_640x480": 90, "determinism": 60, "tests": 150,
+         "pipeline_2592x1936": 150, "memcheck": 90, "racecheck": 90}  # seconds each step may take at most
 MIN_BOX = 10  # a step with less left than this is skipped
-TEST_SELECTION = "cuda and not taichi and not cuda_compile"
 
 
 class StepTimeout(Exception):
@@ -121,241 +121,6 @@ def summary_text(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def log(message: str) -> None:
-    print(f"[gpu_check] {message}", file=sys.stderr, flush=True)
-
-
-# --- device helpers ----------------------------------------------------------------------------------------------
-def make_sync(device: str):
-    import torch
-    import warp as wp
-
-    def sync() -> None:
-        wp.synchronize_device(device)
-        if device.startswith("cuda"):
-            torch.cuda.synchronize()
-
-    return sync
-
-
-def timed(fn, sync) -> float:
-    start = time.perf_counter()
-    fn()
-    sync()
-    return 1e3 * (time.perf_counter() - start)
-
-
-def median_ms(fn, sync, repeat: int) -> dict:
-    runs = [timed(fn, sync) for _ in range(repeat)]
-    return {"median": statistics.median(runs), "best": min(runs), "runs": [round(r, 4) for r in runs]}
-
-
-def peak_memory(device: str, reset: bool = False) -> float | None:
-    """Peak torch-allocated device memory (GB) since the last reset; None on the CPU (Warp's own pool is apart)."""
-    import torch
-
-    if not device.startswith("cuda"):
-        return None
-    if reset:
-        torch.cuda.reset_peak_memory_stats()
-        return None
-    return torch.cuda.max_memory_allocated() / 1e9
-
-
-def random_frames(width: int, height: int, device: str, seed: int = 0):
-    import numpy as np
-    import torch
-
-    rng = np.random.default_rng(seed)
-    return torch.from_numpy(rng.integers(0, 4096, (4, height, width)).astype(np.float32)).to(device)
-
-
-def bits(t):
-    """A float tensor's bits (int32 view, on the host): equal bits = equal values, NaNs included."""
-    import torch
-
-    return t.detach().contiguous().view(torch.int32).cpu()
-
-
-# --- steps -------------------------------------------------------------------------------------------------------
-def step_env(args) -> dict:
-    import torch
-    import warp as wp
-
-    from tpnet_gpu.warp_setup import init_warp
-
-    init_warp()
-    smi = shutil.which("nvidia-smi")
-    gpu = subprocess.run([smi, "--query-gpu=name,driver_version,memory.total", "--format=csv,noheader"],
-                         capture_output=True, text=True, timeout=20).stdout.strip() if smi else None
-    runtime = wp._src.context.runtime if hasattr(wp, "_src") else None
-    return {"python": platform.python_version(), "torch": torch.__version__, "torch_cuda": torch.version.cuda,
-            "torch_cuda_available": torch.cuda.is_available(), "warp": wp.__version__,
-            "warp_cuda_devices": [str(d) for d in wp.get_cuda_devices()], "nvidia_smi": gpu,
-            "warp_driver": getattr(runtime, "driver_version", None),
-            "warp_toolkit": getattr(runtime, "toolkit_version", None),
-            "summary": [f"{gpu or 'no nvidia-smi'}; torch {torch.__version__} (cuda {torch.version.cuda}); "
-                        f"warp {wp.__version__}"]}
-
-
-def step_tp(args) -> dict:
-    import torch
-
-    from tpnet_gpu.processor import TileProcessor
-
-    sync, out, lines = make_sync(args.device), {}, []
-    for width, height in args.sizes:
-        frames = random_frames(width, height, args.device)
-        for graph in (False, True):
-            key = f"{width}x{height}_graph_{'on' if graph else 'off'}"
-            peak_memory(args.device, reset=True)
-            start = time.perf_counter()
-            tp = TileProcessor(height, width, textures=True, graph=graph, device=args.device, backend="warp")
-            build_ms = 1e3 * (time.perf_counter() - start)
-            with torch.inference_mode():
-                first_ms = timed(lambda: tp.process(frames, 2.5), sync)
-                process = median_ms(lambda: tp.process(frames, 2.5), sync, args.repeat)
-                tp.measure(2.5)  # records the measure graph
-                sync()
-                measure = median_ms(lambda: tp.measure(2.5), sync, args.repeat)
-            out[key] = {"build_ms": build_ms, "first_process_ms": first_ms, "process_ms": process,
-                        "measure_ms": measure, "peak_gb": peak_memory(args.device), "tiles": tp.tiles}
-            lines.append(f"{key}: process {process['median']:.3f} ms, measure {measure['median']:.3f} ms "
-                         f"(first call {first_ms:.0f} ms, build {build_ms:.0f} ms)")
-            del tp
-        del frames
-    return {"runs": out, "what": "process = load + convert + correlate + texture; measure = centres + convert + "
-                                 f"correlate; median of {args.repeat} after the first call", "summary": lines}
-
-
-def step_pipeline(args, width: int, height: int, scene: str) -> dict:
-    import torch
-
-    from tpnet_gpu.bench.throughput_pipeline import STAGES, StageClock, scene_frames
-    from tpnet_gpu.pipeline import Pipeline
-
-    sync = make_sync(args.device)
-    frames = torch.from_numpy(scene_frames(width, height, scene, 0)).to(args.device)
-    peak_memory(args.device, reset=True)
-    start = time.perf_counter()
-    pipe = Pipeline(height, width, device=args.device, backend="warp")
-    build_ms = 1e3 * (time.perf_counter() - start)
-    with torch.inference_mode():
-        first_ms = timed(lambda: pipe.process(frames), sync)
-        frame = median_ms(lambda: pipe.process(frames), sync, args.repeat)
-        clock = StageClock(pipe, sync)
-        with clock.hooked():
-            staged = [clock.frame(frames) for _ in range(args.repeat)]
-        passes = float(pipe.process(frames).tile_passes)
-    stages = {s: statistics.median(f[s] for f in staged) for s in STAGES}
-    return {"size": f"{width}x{height}", "scene": scene, "build_ms": build_ms, "first_frame_ms": first_ms, "frame_ms": frame, "stages_ms": stages,
-            "tile_passes": passes, "peak_gb": peak_memory(args.device), "graph": pipe.engine.tp.graph,
-            "summary": [f"frame {frame['median']:.2f} ms ({1e3 / frame['median']:.1f} fps; first {first_ms:.0f} ms), "
-                        + ", ".join(f"{s} {v:.2f}" for s, v in stages.items()) + f" ms; {passes:.2f} tile passes"]}
-
-
-def step_determinism(args) -> dict:
-    import torch
-
-    from tpnet_gpu.bench.throughput_pipeline import scene_frames
-    from tpnet_gpu.pipeline import Pipeline
-    from tpnet_gpu.processor import TileProcessor
-
-    width, height = args.sizes[0]
-    frames = random_frames(width, height, args.device, seed=1)
-    target = torch.rand((height // 8, width // 8), device=args.device) * 6.0 - 1.0
-    names = ("clt", "corr", "layers", "texture")
-    runs = {}
-    with torch.inference_mode():
-        for graph in (False, True):
-            tp = TileProcessor(height, width, textures=True, graph=graph, device=args.device, backend="warp")
-            runs[graph] = [{n: bits(getattr(tp.process(frames, target), n)) for n in names} for _ in range(2)]
-            del tp
-        pipe = Pipeline(height, width, device=args.device, backend="warp")
-        scene = torch.from_numpy(scene_frames(width, height, "demo", 0)).to(args.device)
-        pipeline = []
-        for _ in range(2):
-            r = pipe.process(scene)
-            pipeline.append({n: bits(getattr(r, n)) for n in ("disparity", "confidence", "texture")})
-    same = {f"graph_{'on' if g else 'off'}_run_to_run": {n: bool(torch.equal(a[n], b[n])) for n in names}
-            for g, (a, b) in runs.items()}
-    same["graph_off_vs_on"] = {n: bool(torch.equal(runs[False][0][n], runs[True][0][n])) for n in names}
-    same["pipeline_run_to_run"] = {n: bool(torch.equal(pipeline[0][n], pipeline[1][n])) for n in pipeline[0]}
-    bad = [f"{k}.{n}" for k, v in same.items() if k != "graph_off_vs_on" for n, ok in v.items() if not ok]
-    if bad:
-        raise AssertionError(f"not bit-equal between two runs: {', '.join(bad)} ({json.dumps(same)})")
-    return {"bit_equal": same, "size": f"{width}x{height}",
-            "summary": ["run to run bit-equal: processor (graph off, on) and pipeline; graph off vs on: "
-                        + ", ".join(f"{n} {'=' if ok else '!='}" for n, ok in same["graph_off_vs_on"].items())]}
-
-
-def junit_counts(path: Path) -> dict:
-    root = ET.parse(path).getroot()
-    suite = root if root.tag == "testsuite" else root.find("testsuite")
-    tests, failures, errors, skipped = (int(suite.get(k, 0)) for k in ("tests", "failures", "errors", "skipped"))
-    failed = [f"{case.get('classname')}::{case.get('name')}: {(bad.get('message') or '').splitlines()[0][:200]}"
-              for case in root.iter("testcase") for bad in (*case.findall("failure"), *case.findall("error"))]
-    return {"tests": tests, "passed": tests - failures - errors - skipped, "failed": failures, "errors": errors,
-            "skipped": skipped, "failures": failed[:20]}
-
-
-def step_tests(args, box: int) -> dict:
-    xml = args.out / "tests_cuda.xml"
-    cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-k", TEST_SELECTION,
-           "--continue-on-collection-errors", "--junitxml", str(xml), str(ROOT / "tests")]
-    done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=max(5, box - 5))
-    (args.out / "tests_cuda.txt").write_text(done.stdout[-200_000:] + done.stderr[-50_000:])
-    counts = junit_counts(xml)
-    if done.returncode not in (0, 5) or counts["failed"] or counts["errors"]:  # 5: nothing collected
-        raise AssertionError(f"pytest exit status {done.returncode}: {json.dumps(counts)[:1500]}")
-    return {**counts, "selection": TEST_SELECTION,
-            "summary": [f"{counts['passed']} passed, {counts['skipped']} skipped of {counts['tests']} "
-                        f"(-k '{TEST_SELECTION}')"]}
-
-
-def find_sanitizer() -> str | None:
-    found = shutil.which("compute-sanitizer")
-    if found:
-        return found
-    for root in sorted(Path("/usr/local").glob("cuda*"), reverse=True):
-        if (root / "bin" / "compute-sanitizer").exists():
-            return str(root / "bin" / "compute-sanitizer")
-    return None
-
-
-def step_sanitizer(args, tool: str, box: int) -> dict:
-    tool_path = find_sanitizer()
-    if tool_path is None:
-        return {"ok": None, "skipped": "compute-sanitizer not found (PATH, /usr/local/cuda*/bin)"}
-    report = args.out / f"{tool}.txt"
-    cmd = [tool_path, "--tool", tool, "--error-exitcode", "3", "--log-file", str(report), sys.executable,
-           str(Path(__file__).resolve()), "--sanitizer-payload", "--device", args.device]
-    done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=max(5, box - 5))
-    text = report.read_text() if report.exists() else ""
-    tail = [line for line in text.splitlines() if "ERROR SUMMARY" in line or "RACECHECK SUMMARY" in line]
-    if done.returncode != 0:
-        raise AssertionError(f"{tool}: exit status {done.returncode}; {' '.join(tail)}; {done.stderr[-800:]}")
-    return {"summary": tail or [f"{tool}: clean"], "payload_stdout": done.stdout[-1000:]}
-
-
-def sanitizer_payload(device: str) -> None:
-    """What the sanitizer watches: a 64x48 processor with graphs off and on, and one pipeline frame."""
-    import torch
-
-    from tpnet_gpu.pipeline import Pipeline
-    from tpnet_gpu.processor import TileProcessor
-
-    frames = random_frames(64, 48, device)
-    with torch.inference_mode():
-        for graph in (False, True):
-            tp = TileProcessor(48, 64, textures=True, graph=graph, device=device, backend="warp")
-            for _ in range(2):
-                tp.process(frames, 1.5)
-        Pipeline(48, 64, device=device, backend="warp").process(frames)
-    make_sync(device)()
-    print("sanitizer payload done")
-
-
 # --- main --------------------------------------------------------------------------------------------------------
 def parse_args(argv):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -385,7 +150,7 @@ def main(argv=None) -> int:
     os.environ.setdefault("WARP_CACHE_PATH", "/tmp/warp-cache")
     os.environ.setdefault("TPNET_CACHE_DIR", "/tmp/tpnet-cache")
     if args.sanitizer_payload:
-        sanitizer_payload(args.device)
+        gs.sanitizer_payload(args.device)
         return 0
     import torch
 
@@ -402,14 +167,15 @@ def main(argv=None) -> int:
                                             "dry_run": args.dry_run, "argv": sys.argv[1:] if argv is None else argv})
     full_w, full_h = args.full
     steps = {
-        "env": lambda box: step_env(args),
-        "tp": lambda box: step_tp(args),
-        "pipeline_640x480": lambda box: step_pipeline(args, *args.sizes[0], "demo"),
-        "determinism": lambda box: step_determinism(args),
-        "tests": lambda box: step_tests(args, box),
-        "pipeline_2592x1936": lambda box: step_pipeline(args, full_w, full_h, "random"),
-        "memcheck": lambda box: step_sanitizer(args, "memcheck", box),
-        "racecheck": lambda box: step_sanitizer(args, "racecheck", box),
+        "env": lambda box: gs.step_env(args),
+        "compile": lambda box: gs.step_compile(args, box),
+        "tp": lambda box: gs.step_tp(args),
+        "pipeline_640x480": lambda box: gs.step_pipeline(args, *args.sizes[0], "demo"),
+        "determinism": lambda box: gs.step_determinism(args),
+        "tests": lambda box: gs.step_tests(args, box),
+        "pipeline_2592x1936": lambda box: gs.step_pipeline(args, full_w, full_h, "random"),
+        "memcheck": lambda box: gs.step_sanitizer(args, "memcheck", box),
+        "racecheck": lambda box: gs.step_sanitizer(args, "racecheck", box),
     }
     for name in args.steps:
         entry = check.step(name, steps[name])
