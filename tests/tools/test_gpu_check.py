@@ -43,6 +43,7 @@ def _run(args, tmp_path, extra_path=None) -> tuple[subprocess.CompletedProcess, 
     return done, json.loads((tmp_path / "out" / "gpu_check.json").read_text())
 
 
+@pytest.mark.slow
 def test_dry_run_with_a_sanitizer(tmp_path):
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
