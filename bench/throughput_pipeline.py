@@ -76,6 +76,7 @@ class StageClock:
     def __init__(self, pipe: Pipeline, sync):
         self.pipe, self.sync = pipe, sync
         self.marks: list[tuple[str, float]] = []
+        self.result = None  # the last clocked frame's FrameResult
         texture_tp = pipe.network_tp if pipe.model is not None else pipe.engine.tp
         self.parts = [(pipe.engine, "search", "engine search"), (pipe.engine, "run", "engine refine"),
                       (texture_tp, "texture", "texture")]
@@ -109,11 +110,12 @@ class StageClock:
         return timed
 
     def frame(self, frames) -> dict[str, float]:
-        """One ``process(frames)``: ms per stage (``STAGES``; 0 for a stage the frame has not got)."""
+        """One ``process(frames)``: ms per stage (``STAGES``; 0 for a stage the frame has not got); its result is
+        kept in ``self.result``."""
         self.marks = []
         self.sync()
         start = time.perf_counter()
-        self.pipe.process(frames)
+        self.result = self.pipe.process(frames)
         self.sync()
         self.marks.append(("rest", time.perf_counter()))
         out, last = dict.fromkeys(STAGES, 0.0), start
@@ -167,7 +169,7 @@ def run_pipeline(width: int, height: int, args, device, sync) -> dict:
         clock = StageClock(pipe, sync)
         with clock.hooked():
             staged = [clock.frame(frames_t) for _ in range(args.pipeline_frames)]
-        result = pipe.process(frames_t)
+        result = clock.result
         tile_passes = float(result.tile_passes)
         tp_rows = _tp_pass_rows(pipe, frames_t, result.search.clone(), sync, args.pipeline_frames)
     tp = pipe.engine.tp

@@ -192,7 +192,7 @@ def step_pipeline(args, width: int, height: int, scene: str) -> dict:
         clock = StageClock(pipe, sync)
         with clock.hooked():
             staged = [clock.frame(frames) for _ in range(args.repeat)]
-        passes = float(pipe.process(frames).tile_passes)
+        passes = float(clock.result.tile_passes)
     stages = {s: statistics.median(f[s] for f in staged) for s in STAGES}
     return {"size": f"{width}x{height}", "scene": scene, "build_ms": build_ms, "first_frame_ms": first_ms,
             "frame_ms": frame, "stages_ms": stages, "tile_passes": passes, "memory": memory(args.device),
