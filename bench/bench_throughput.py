@@ -2,6 +2,7 @@
 
     tpnet bench throughput [--device cpu|cuda] [--height 1936 --width 2592] [--repeat 3] [--threads N]
                            [--taichi-threads 1,2 | --no-taichi] [--json out/bench_throughput.json] [--soak N]
+                           [--pipeline-sizes 640x480,2592x1936] [--pipeline-frames 3] [--pipeline-only]
     python -m tpnet_gpu.bench.bench_throughput [same options]
 
 One quad frame (4 cameras, random 12-bit raw values, seeded), every tile at one target disparity. Three
@@ -30,6 +31,13 @@ offers a graph option (``graph`` / ``use_graph``; 'n/a' otherwise; on CPU the sa
 graph, measured too), and the paper's GTX 1050 Ti figures beside ours. Targets: on an
 H100 the TP <= 1 ms and TP+network <= 3 ms per quad frame; on CPU the Warp path >= 2x the vectorised NumPy one.
 
+Pipeline rows (throughput_pipeline.py): ``Pipeline.process`` per whole frame and per stage (engine search,
+engine refine, network, texture) for each of ``--pipeline-sizes`` (default 640x480; add 2592x1936 for the full
+frame), one full-frame tile-processor pass beside the torch twin's on the same device, the paper's figures as a
+reference row and the frame's H200 floor. ``--pipeline-only`` runs just those. Floor (throughput_floor.py): bytes
+and FLOPs counted from the buffer and transform sizes, at the H200's HBM bandwidth and FP32 peak, for the
+whole-frame rows and the pipeline frames.
+
 ``--soak N`` first streams N random frames of ``--height`` x ``--width`` (fresh frames and per-tile target
 disparities each time) through ``TileProcessor.process`` and ``TPNet.forward_frame``, sampling the process RSS
 (VmRSS) every 50 frames. Table, paper figures, targets and soak summary go to stdout, progress to stderr, all
@@ -37,7 +45,8 @@ numbers with machine information to JSON.
 
 Modules: this one (the Warp and twin runs, the network split, ``main``); throughput_common.py (stage timing,
 agreement), throughput_taichi.py (the Taichi worker processes), throughput_stream.py (graph replay,
-soak), throughput_report.py (table, targets, printed report).
+soak), throughput_report.py (table, targets, printed report), throughput_pipeline.py (the pipeline rows),
+throughput_floor.py (bytes, FLOPs and the H200 floor).
 """
 
 from __future__ import annotations
@@ -56,12 +65,15 @@ import warp as wp
 
 from tpnet_gpu import tables
 from tpnet_gpu.net import model as net_model
-from tpnet_gpu.processor import TileProcessor
+from tpnet_gpu.processor import BACKENDS, TileProcessor
 from tpnet_gpu.warp_setup import default_device, init_warp
 
 from . import common
 from .common import PAPER_GPU, PAPER_TP_MS
 from .throughput_common import AGREEMENT_TOL, agreement, log, run_stages
+from .throughput_floor import H200, tp_rows_floor
+from .throughput_pipeline import SCENES, parse_sizes, print_pipeline
+from .throughput_pipeline import run_all as pipeline_rows
 from .throughput_report import PAPER_NETWORK_S, print_report, stage_table, targets
 from .throughput_stream import measure_graph_replay, soak
 from .throughput_taichi import run_taichi, spawn_taichi, taichi_columns
@@ -224,6 +236,11 @@ def run_twin(impl: str, args, cfa, frames, frames_t, target, net, reference: dic
 
 
 # --- main -------------------------------------------------------------------------------------------------------
+def _device_entry(device, tdev: torch.device) -> dict:
+    return {"warp_device": str(device), "torch_device": str(tdev), "name": common.device_name(device),
+            "is_cuda": device.is_cuda}
+
+
 def main(argv=None) -> dict:
     parser = common.parser(__name__, __doc__)
     common.frame_arguments(parser)
@@ -234,8 +251,21 @@ def main(argv=None) -> dict:
                         help="Taichi CPU thread counts, one process each (default 1,2; CPU runs only)")
     parser.add_argument("--no-taichi", action="store_true", help="skip the Taichi backend")
     parser.add_argument("--taichi-worker", default=None, help=argparse.SUPPRESS)  # internal: JSON path of a worker
+    parser.add_argument("--pipeline-sizes", default="640x480",
+                        help="Pipeline.process rows, WIDTHxHEIGHT,... (default 640x480; add 2592x1936: ~7 GB; '' none)")
+    parser.add_argument("--pipeline-frames", type=int, default=3, help="timed pipeline frames per size (default 3)")
+    parser.add_argument("--pipeline-scene", choices=SCENES, default="demo", help="pipeline frames (default demo)")
+    parser.add_argument("--pipeline-backend", choices=BACKENDS, default=None,
+                        help="the pipeline's kernel language (default: TileProcessor's default for the device)")
+    parser.add_argument("--pipeline-only", action="store_true", help="only the pipeline rows (no tile-processor rows)")
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
+    try:
+        args.pipeline_sizes = parse_sizes(args.pipeline_sizes)
+    except ValueError as exc:
+        parser.error(str(exc))
+    if args.pipeline_frames < 1:
+        parser.error("--pipeline-frames: expected at least 1")
     try:
         args.taichi_threads = [int(n) for n in args.taichi_threads.split(",") if n.strip()]
     except ValueError:
@@ -256,6 +286,13 @@ def main(argv=None) -> dict:
     torch.manual_seed(args.seed)
     net = net_model.TPNet().eval().to(tdev)  # Xavier-initialised: the timing does not depend on the weights
 
+    if args.pipeline_only:  # the pipeline rows alone
+        report = {"pipeline": pipeline_rows(args, device, tdev), "device": _device_entry(device, tdev),
+                  "machine": common.machine_info(torch_threads=torch.get_num_threads())}
+        print_pipeline(report["pipeline"], report["device"]["name"])
+        if args.json:
+            log(f"wrote {common.save_json(report, args.json)}")
+        return report
     soak_report = None
     if args.soak:
         log(f"soak: {args.soak} frames of {args.width}x{args.height} ...")
@@ -298,6 +335,9 @@ def main(argv=None) -> dict:
     impls = IMPLEMENTATIONS + tuple(column for column, _ in columns)
     log("graph replay ...")
     graph = measure_graph_replay(args, cfa, device, frames_t, target, net)
+    del frames, frames_t
+    gc.collect()
+    pipeline = pipeline_rows(args, device, tdev)
 
     # --- report ---------------------------------------------------------------------------------------------------
     table = stage_table(runs, warmups, impls)
@@ -334,8 +374,11 @@ def main(argv=None) -> dict:
         "paper": {"gpu": PAPER_GPU, "tp_ms": PAPER_TP_MS, "network_s": list(PAPER_NETWORK_S),
                   "note": "one full quad frame; comparable only with CUDA timings"},
         "targets": report_targets,
+        "floor": {"gpu": H200, "rows": tp_rows_floor(args.height, args.width, 1 if cfa is None else 3, net),
+                  "counting": "bench/throughput_floor.py"},
+        "pipeline": pipeline,
         "soak": soak_report,
-        "device": {"warp_device": str(device), "torch_device": str(tdev), "name": gpu_name, "is_cuda": is_cuda},
+        "device": _device_entry(device, tdev),
         "machine": common.machine_info(
             torch_threads=torch.get_num_threads(),
             threads="Warp CPU kernels run on one thread; NumPy's BLAS and torch use all cores unless limited "
@@ -343,6 +386,7 @@ def main(argv=None) -> dict:
             cuda=torch.cuda.get_device_name(tdev) if tdev.type == "cuda" else None),
     }
     print_report(report)
+    print_pipeline(pipeline, gpu_name)
     if args.json:
         log(f"wrote {common.save_json(report, args.json)}")
     return report

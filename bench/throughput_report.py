@@ -146,6 +146,10 @@ def print_report(report: dict) -> None:
           f"stage 2 {ours['network stage 1']:.4g} + {ours['network stage 2']:.4g} ms (whole frame "
           f"{ours['network whole frame']:.4g} ms), TP+network {ours['TP+network whole frame']:.4g} ms"
           + ("" if d["is_cuda"] else " [CPU: not comparable with the paper's GPU figures]"))
+    fl = report["floor"]
+    print(f"floor ({fl['gpu']['name']}: {fl['gpu']['source']}; counting: {fl['counting']}): " + ", ".join(
+        f"{name} {r['floor_ms']:.3g} ms ({r['bytes'] / 1e9:.3f} GB, {r['flops'] / 1e9:.2f} GFLOP, {r['bound']} bound;"
+        f" ours / floor {ours[name] / r['floor_ms']:.0f}x)" for name, r in fl["rows"].items()))
     for target in report["targets"].values():
         value = target.get("ours_ms")
         got = f"ours {value:.3f} ms" if value is not None else (

@@ -21,6 +21,9 @@ from tpnet_gpu.bench import bench_network, bench_throughput, bench_tp, common
 from tpnet_gpu.bench.throughput_report import ROWS
 
 TINY = ["--height", "32", "--width", "48", "--repeat", "1", "--device", "cpu"]  # 4 x 6 tiles
+PIPELINE = ["--pipeline-sizes", "64x48", "--pipeline-frames", "1", "--pipeline-backend", "warp"]  # 6 x 8 tiles
+PIPELINE_ROW = {"size", "tiles", "backend", "process_ms", "fps", "stages_ms", "tile_passes", "tp_pass",
+                "twin_tp_estimate_ms", "floor"}
 SPEED_KEYS = {"frame", "timing", "stages", "device", "machine", "paper", "agreement"}
 ACCURACY_KEYS = {"bench", "scenes", "width", "height", "seed", "machine", "stats", "per_frame", "rmse_by_spread",
                  "table"}
@@ -76,20 +79,42 @@ def _check_throughput(report: dict, columns: list[str]) -> None:
         for name, stats in report["agreement"][impl].items():
             assert stats["max_rel_diff"] < 1e-4, (impl, name)
     assert report["agreement"]["network_split_vs_forward_frame_max_abs_diff"] < 1e-5
+    assert set(report["floor"]["rows"]) == {"TP whole frame", "network whole frame", "TP+network whole frame"}
+
+
+def _check_pipeline(section: dict, scene: str) -> None:
+    (row,) = section["rows"]
+    assert PIPELINE_ROW <= set(row) and row["size"] == {"width": 64, "height": 48} and row["scene"] == scene
+    assert set(row["stages_ms"]) == set(section["stages"]) and row["tile_passes"] > 0
+    assert row["tp_pass"]["corr_agreement"]["max_rel_diff"] < 1e-4  # the twin against the engine's processor
+    assert row["floor"]["frame"]["floor_ms"] > row["floor"]["tp_pass"]["floor_ms"] > 0
+    assert section["paper"]["tp_ms"] == 87.0
 
 
 def test_bench_throughput_without_taichi(tmp_path, capsys):
-    report, out, err = run_bench(bench_throughput, [*TINY, "--no-taichi", "--soak", "2"], tmp_path, capsys)
+    report, out, err = run_bench(bench_throughput, [*TINY, "--no-taichi", "--soak", "2", *PIPELINE], tmp_path,
+                                 capsys)
     _check_throughput(report, ["warp", "numpy", "torch"])
+    _check_pipeline(report["pipeline"], "demo")
+    assert "Pipeline.process" in out and "paper 2592x1936" in out and "floor (NVIDIA H200" in out
     assert report["soak"]["frames"] == 2 and report["soak"]["size"] == {"width": 48, "height": 32}
     assert report["graph_replay"]["available"]
     assert "TP+network whole frame" in out and "[bench_throughput]" in err
 
 
+def test_bench_throughput_pipeline_only(tmp_path, capsys):
+    argv = ["--device", "cpu", "--pipeline-only", "--pipeline-scene", "random", *PIPELINE]
+    report, out, _ = run_bench(bench_throughput, argv, tmp_path, capsys)
+    assert set(report) == {"pipeline", "device", "machine"}
+    _check_pipeline(report["pipeline"], "random")
+    assert "convert" not in out and "64x48 floor" in out
+
+
 @pytest.mark.slow
 def test_bench_throughput_taichi_worker(tmp_path, capsys):
     # One Taichi column: a worker process started as `python -m tpnet_gpu.bench.bench_throughput`.
-    report, out, _ = run_bench(bench_throughput, [*TINY, "--taichi-threads", "1"], tmp_path, capsys)
+    argv = [*TINY, "--taichi-threads", "1", "--pipeline-sizes", ""]
+    report, out, _ = run_bench(bench_throughput, argv, tmp_path, capsys)
     _check_throughput(report, ["warp", "numpy", "torch", "taichi-1t"])
     assert report["timing"]["taichi_setup"]["taichi-1t"]["threads"] == 1
     assert "taichi-1t ms" in out
