@@ -25,3 +25,8 @@ CENTRE_LIMIT = 1.0e6
 # keeps Warp from compiling a module twice). On the CPU a block is one lane (platform.md §1).
 CUDA_BLOCK_DIM = 64
 CPU_BLOCK_DIM = 1
+# Workers of the fused tile pass, each with its own scratch of one tile's spectra (cams x used colours x 4 x 8 x 8):
+# on CUDA one block / thread each (tiles beyond are taken in turn; 8192 x 4 cams x 3 colours: ~100 MB); on the
+# CPU a few per Taichi thread, so the threads stay balanced.
+CUDA_FUSED_SLOTS = 8192
+CPU_FUSED_SLOTS_PER_THREAD = 8

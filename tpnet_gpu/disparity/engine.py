@@ -127,9 +127,7 @@ class DisparityEngine:
     def measure_at(self, tp: TileProcessor, target: torch.Tensor, active=None):
         """Convert and correlate ``tp``'s loaded frame at ``target``; returns its ``TileResult``."""
         self.set_targets(tp, target, active)
-        tp.convert()
-        tp.correlate()
-        return tp.result
+        return tp.run_measurement()
 
     def _choose(self, volume: CostVolume) -> tuple[torch.Tensor, torch.Tensor]:
         cost = 1.0 - torch.nan_to_num(volume.values, nan=0.0).clamp(-1.0, 1.0)
