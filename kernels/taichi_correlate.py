@@ -78,8 +78,10 @@ def pair_spectrum(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.t
                                a0 * b2 - a2 * b0 + a1 * b3 - a3 * b1,
                                a0 * b3 + a3 * b0 - a1 * b2 - a2 * b1])
                 for q in ti.static(range(4)):
-                    x_rb[N * (q >> 1) + ky, N * (q & 1) + kx] += w_rb * p[q]
                     x[N * (q >> 1) + ky, N * (q & 1) + kx] += w * p[q]
+                if w_rb != 0.0:
+                    for q in ti.static(range(4)):
+                        x_rb[N * (q >> 1) + ky, N * (q & 1) + kx] += w_rb * p[q]
     for ky in range(N):
         for kx in ti.static(range(N)):
             s = ti.Vector.zero(ti.f32, 4)
@@ -100,34 +102,41 @@ def spectrum_to_lags(x: ti.template(), unfold_index: ti.template(), unfold_sign:
     unfold_sign (2, 15), ``operators.unfold_gather``, for the rows; their constants for the columns)."""
     p = ti.Matrix.zero(ti.f32, 2 * N, 2 * N)  # P_q = X_q D_{q&1}^T (column side): p[row, 8 (q & 1) + m]
     for row in range(2 * N):
+        acc = ti.Vector.zero(ti.f32, 2 * N)  # in registers: one store per element of p
         for hs in ti.static(range(2)):
             for k in ti.static(range(HALF)):
                 even = x[row, N * hs + k] + x[row, N * hs + N - 1 - k]
                 odd = x[row, N * hs + k] - x[row, N * hs + N - 1 - k]
                 for m in ti.static(range(0, N, 2)):
-                    p[row, N * hs + m] += ti.static(HALF_DTT2E[hs][m][k]) * even
-                    p[row, N * hs + m + 1] += ti.static(HALF_DTT2E[hs][m + 1][k]) * odd
+                    acc[N * hs + m] += ti.static(HALF_DTT2E[hs][m][k]) * even
+                    acc[N * hs + m + 1] += ti.static(HALF_DTT2E[hs][m + 1][k]) * odd
+        for j in ti.static(range(2 * N)):
+            p[row, j] = acc[j]
     y = ti.Matrix.zero(ti.f32, 2 * N, 2 * N)  # Y_q = D_{q>>1} P_q (row side): y[8 (q >> 1) + m, col]
     for col in range(2 * N):
+        acc = ti.Vector.zero(ti.f32, 2 * N)
         for vs in ti.static(range(2)):
             for k in ti.static(range(HALF)):
                 even = p[N * vs + k, col] + p[N * vs + N - 1 - k, col]
                 odd = p[N * vs + k, col] - p[N * vs + N - 1 - k, col]
                 for m in ti.static(range(0, N, 2)):
-                    y[N * vs + m, col] += ti.static(HALF_DTT2E[vs][m][k]) * even
-                    y[N * vs + m + 1, col] += ti.static(HALF_DTT2E[vs][m + 1][k]) * odd
+                    acc[N * vs + m] += ti.static(HALF_DTT2E[vs][m][k]) * even
+                    acc[N * vs + m + 1] += ti.static(HALF_DTT2E[vs][m + 1][k]) * odd
+        for j in ti.static(range(2 * N)):
+            y[j, col] = acc[j]
+    # The column unfold first (per row of Y: cosine part + signed sine part, 15 columns), then the rows gather.
+    a = ti.Matrix.zero(ti.f32, 2 * N, CORR_SIDE)
+    for row in range(2 * N):
+        for c in ti.static(range(CORR_SIDE)):
+            a[row, c] = y[row, ti.static(lag_col(0, c))]
+            if ti.static(lag_sign(1, 0, c) != 0.0):  # the sine part is 0 at lag 0
+                a[row, c] += ti.static(lag_sign(1, 0, c)) * y[row, ti.static(lag_col(1, c))]
     for r in range(CORR_SIDE):
         row_c = unfold_index[0, r]
         row_s = N + unfold_index[1, r]
         sign_r = unfold_sign[1, r]  # the cosine parts' signs are +1
         for c in ti.static(range(CORR_SIDE)):
-            value = y[row_c, ti.static(lag_col(0, c))]
-            if ti.static(lag_sign(1, 0, c) != 0.0):
-                value += ti.static(lag_sign(1, 0, c)) * y[row_c, ti.static(lag_col(1, c))]
-            value += sign_r * y[row_s, ti.static(lag_col(2, c))]
-            if ti.static(lag_sign(1, 0, c) != 0.0):
-                value += ti.static(lag_sign(1, 0, c)) * sign_r * y[row_s, ti.static(lag_col(3, c))]
-            corr[out, r, c] = value
+            corr[out, r, c] = a[row_c, c] + sign_r * a[row_s, c]
 
 
 @ti.func
