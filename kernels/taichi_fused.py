@@ -4,7 +4,7 @@ the CLT buffer (tile_processor.md §1.4, §3-§6; network.md §1).
 Two loops in one launch. First a task list: the indices of the active tiles, compacted with an atomic counter
 (their order varies between runs; every tile's results are its own, so the outputs do not); inactive tiles get
 their outputs cleared there (finite and valid 0, correlations and layers zero). Then per worker ``slot`` (a CPU
-task or a GPU thread) a contiguous share of the task list: per tile every camera's window is converted (only the
+task or a GPU thread) every slots-th task of the list: per tile every camera's window is converted (only the
 colours the correlation uses, ``used``) into the slot's own few-KB scratch, which stays in cache, and every pair
 is correlated from there (the same ``ti.func``s as the split kernels, kernels/taichi_convert.py and
 kernels/taichi_correlate.py).
@@ -87,10 +87,9 @@ def fused_tiles(
             valid[tile] = ti.u8(0)
             clear_tile(tile, npairs, corr, layers, with_layers)
     n = count[0]
-    ti.loop_config(block_dim=1)  # one slot per CPU task: the slots' shares are large and equal
     for slot in range(slots):
-        share = (n + slots - 1) // slots
-        for i in range(slot * share, ti.min(n, (slot + 1) * share)):
+        i = slot
+        while i < n:  # tasks slot, slot + slots, ...: equal shares in any order of the list
             tile = tasks[i]
             all_finite = 1
             all_inside = 1
@@ -117,3 +116,4 @@ def fused_tiles(
                                    lpf_corr, unfold_index, unfold_sign, corr, tile * npairs + p)
                 if ti.static(with_layers):
                     tile_layers(corr, tile, net_offset, layers)
+            i += slots
