@@ -19,7 +19,9 @@ the next starts: a full-frame CLT is ~1 GB):
 
 Rows: convert, correlate, texture (Warp and Taichi), network stage 1 (tile inputs + the per-tile MLP), network stage 2
 (5x5 cluster convolution + the rest), network whole frame (``forward_frame``), TP whole frame (prepare + convert +
-correlate for Warp; convert + correlate for the twins, which take the processor's tile centres) and TP+network
+correlate for Warp; convert + correlate for the twins, which take the processor's tile centres), TP fused whole
+frame (Warp and Taichi: prepare + ``TileProcessor.fused``, the one-pass path ``measure`` takes when the CLT tiles
+are not kept; timed on the same processor, so its peak memory is not the fused one's) and TP+network
 whole frame (the TP whole frame, then the network on its layers; the twins combine their correlations into layers
 with ``torch_layers``). The network rows are one PyTorch model on the processor's device, timed once and listed
 under warp. Each row: one warm-up call (Warp: kernel compilation or cache load; all: first touch of buffers), then
@@ -138,6 +140,10 @@ def run_warp(args, cfa, device, frames_t, target, net) -> dict:
         tp.convert()
         tp.correlate()
 
+    def tp_fused() -> None:
+        tp.prepare(frames_t, args.disparity)
+        tp.fused()
+
     def stage1() -> None:
         state["features"] = network_stage1(net, layers, target)
 
@@ -159,6 +165,7 @@ def run_warp(args, cfa, device, frames_t, target, net) -> dict:
         "network stage 2": stage2,
         "network whole frame": network,
         "TP whole frame": tp_whole,
+        "TP fused whole frame": tp_fused,
         "TP+network whole frame": tp_network,
     }
     with torch.inference_mode():

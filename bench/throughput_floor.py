@@ -8,7 +8,8 @@ Counting (float32 = 4 bytes; every size from ``tpnet_gpu.layout`` and the proces
   them are taken to hit the caches, so this is a lower bound. Steps: ``load`` reads the frames and writes the
   padded frames; ``centres`` reads the targets and writes the tile centres; ``convert`` reads the padded frames
   and the centres and writes the CLT; ``correlate`` reads the CLT and writes the correlations (the quad's layers
-  step then reads them and writes the layers); ``texture`` is its 4 launches: imclt (CLT -> pixels), demosaic
+  step then reads them and writes the layers); ``fused`` (what a measurement pass runs: tile_processor.py) is
+  convert + correlate without the CLT's write and read; ``texture`` is its 4 launches: imclt (CLT -> pixels), demosaic
   (pixels -> compared values), combine (both -> camera weights and RGBA contributions), overlap-add (RGBA ->
   canvas).
 * **FLOPs**: matrix products as 2 m k n at the kernels' transform sizes, plus the per-frequency products (a
@@ -21,8 +22,10 @@ Counting (float32 = 4 bytes; every size from ``tpnet_gpu.layout`` and the proces
   per tile: 2 x inputs x outputs of every layer (stage 2's first layer is the 5x5 cluster: 800 inputs).
 
 Times: ``memory_ms`` = bytes / bandwidth, ``compute_ms`` = FLOPs / FP32 peak, ``floor_ms`` = the larger (the
-two overlap at best). The pipeline's floor adds its tile-processor passes (``tile_passes`` of the engine, in
-full-resolution passes, + one per network pass, + the texture's convert) and the network; the engine's torch
+two overlap at best). The texture's scratch is allocated per band of tile rows but every tile's share is written
+and read once per frame, so its traffic is counted for the whole frame. The pipeline's floor adds its fused
+tile-processor passes (``tile_passes`` of the engine, in full-resolution passes, + one per network pass), the
+texture's convert and the network; the engine's torch
 work on the correlations (cost volumes, SGM) is not counted.
 """
 
@@ -64,7 +67,8 @@ def matmul(m: int, k: int, n: int) -> int:
 
 
 def buffer_elements(height: int, width: int, cams: int, colours: int, pairs: int) -> dict[str, int]:
-    """float32 elements of the processor's per-frame buffers (``processor.buffers.Buffers``), by its names."""
+    """float32 elements each per-frame buffer of the processor (``processor.buffers.Buffers``, by its names) holds
+    for the whole frame (the texture's scratch is allocated one band at a time: ``buffers.texture_band_tiles``)."""
     tiles = (height // TILE_STRIDE) * (width // TILE_STRIDE)
     side = TILE_SIZE * TILE_SIZE
     margin = TILE_STRIDE // 2
@@ -93,16 +97,19 @@ def tp_steps(height: int, width: int, cams: int, colours: int, pairs: int, layer
     spectra = colours * 4 * MN * (4 + 3 + 2) + (4 * MN if colours == 3 else 0) + 4 * MN * 2 + MN * 8
     lags = 4 * (matmul(DTT_SIZE, DTT_SIZE, CORR_SIDE) + matmul(CORR_SIDE, DTT_SIZE, CORR_SIDE))
     texture = 4 * MN + 4 * (matmul(DTT_SIZE, DTT_SIZE, TILE_SIZE) + matmul(TILE_SIZE, DTT_SIZE, TILE_SIZE))
+    convert_flops, correlate_flops = tiles * cams * colours * convert, tiles * pairs * (spectra + lags)
     steps = {
         "load": Work(e["frames"] + e["padded"]),
         "centres": Work(e["disparity"] + e["centres"]),
-        "convert": Work(e["padded"] + e["centres"] + e["clt"], tiles * cams * colours * convert),
-        "correlate": Work(e["clt"] + e["corr"], tiles * pairs * (spectra + lags)),
+        "convert": Work(e["padded"] + e["centres"] + e["clt"], convert_flops),
+        "correlate": Work(e["clt"] + e["corr"], correlate_flops),
+        "fused": Work(e["padded"] + e["centres"] + e["corr"], convert_flops + correlate_flops),
         "texture": Work(e["clt"] + 3 * e["tex_pix"] + 2 * e["tex_cmp"] + e["tex_weights"] + 2 * e["tex_rgba"]
                         + e["canvas"], tiles * cams * colours * texture),
     }
     if layers:
         steps["correlate"] += Work(e["corr"] + e["layers"])
+        steps["fused"] += Work(e["corr"] + e["layers"])
     return steps
 
 
@@ -116,8 +123,8 @@ def network_work(net, tiles: int) -> Work:
 
 
 def tp_pass(steps: dict[str, Work]) -> Work:
-    """One measurement pass at new targets: centres + convert + correlate."""
-    return steps["centres"] + steps["convert"] + steps["correlate"]
+    """One measurement pass at new targets (``TileProcessor.measure``): centres + the fused pass."""
+    return steps["centres"] + steps["fused"]
 
 
 def pipeline_work(steps: dict[str, Work], net: Work | None, tile_passes: float, network_passes: int,

@@ -26,6 +26,7 @@ ROWS = (
     ("network stage 2", False),
     ("network whole frame", True),
     ("TP whole frame", True),
+    ("TP fused whole frame", True),  # prepare + the fused pass (what measure runs without kept CLT tiles)
     ("TP+network whole frame", True),
 )
 

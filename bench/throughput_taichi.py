@@ -48,12 +48,16 @@ def run_taichi(args, cfa, device, frames_t, target, net) -> dict:
         tp.convert()
         tp.correlate()
 
+    def tp_fused() -> None:
+        tp.prepare(frames_t, args.disparity)
+        tp.fused()
+
     def tp_network() -> None:
         tp_whole()
         net.forward_frame(layers, target)
 
     stages = {"convert": tp.convert, "correlate": tp.correlate, "texture": tp.texture, "TP whole frame": tp_whole,
-              "TP+network whole frame": tp_network}
+              "TP fused whole frame": tp_fused, "TP+network whole frame": tp_network}
     label = f"taichi ({taichi_setup.current_arch()}, {taichi_setup.threads()} CPU threads)"
     with torch.inference_mode():
         warmup, runs = run_stages(label, stages, sync, args.repeat)

@@ -74,6 +74,94 @@ def kernel_node(position: float, nodes: int) -> int:
     return wp.clamp(int(wp.floor(position / 16.0)) + 1, 0, nodes - 1)
 
 
+@wp.func
+def convert_camera(
+    padded: wp.array3d(dtype=wp.float32),
+    centres: wp.array3d(dtype=wp.float32),
+    tile: int,
+    cam: int,
+    masks: wp.array3d(dtype=wp.float32),
+    k_rows: wp.array2d(dtype=wp.float32),
+    n_rows: wp.array2d(dtype=wp.float32),
+    n_cols: wp.array2d(dtype=wp.float32),
+    k_cols: wp.array2d(dtype=wp.float32),
+    kernels: wp.array3d(dtype=wp.float32),
+    kernel_rows: int,
+    kernel_cols: int,
+    use_kernels: bool,
+    image_height: int,
+    image_width: int,
+    colours: int,
+    colour_list: wp.array(dtype=wp.int32),
+    dest: wp.array3d(dtype=wp.float32),
+    dest_base: int,
+):
+    """Camera ``cam``'s window of ``tile``, converted for the colours colour_list[u] into dest[dest_base + 4 u + q]
+    (the split kernel: every colour into the CLT buffer; the fused one: the used colours into its scratch).
+    Returns (finite: every pixel and the centre finite, inside: the window wholly inside the image)."""
+    finite = bool(True)
+    inside = bool(True)
+    cx = centres[tile, cam, 0]
+    cy = centres[tile, cam, 1]
+    if not (wp.isfinite(cx) and wp.isfinite(cy)):
+        finite = False
+        cx = 0.0
+        cy = 0.0
+    px = wp.clamp(cx, -CENTRE_LIMIT, CENTRE_LIMIT) - float(HALF_WINDOW)
+    py = wp.clamp(cy, -CENTRE_LIMIT, CENTRE_LIMIT) - float(HALF_WINDOW)
+    itl_x = int(wp.floor(px + 0.5))
+    itl_y = int(wp.floor(py + 0.5))
+    sx = float(itl_x) - px
+    sy = float(itl_y) - py
+    if itl_x < 0 or itl_y < 0 or itl_x + 16 > image_width or itl_y + 16 > image_height:
+        inside = False
+    window = wp.tile_load(
+        padded[cam], shape=(16, 16), offset=(window_corner(itl_y, image_height), window_corner(itl_x, image_width))
+    )
+    bad = wp.tile_sum(wp.tile_map(non_finite, window))
+    if wp.tile_extract(bad, 0) > 0.0:
+        finite = False
+    window = wp.tile_map(finite_or_zero, window)
+    # Per-axis bases: rows (8, 16) for the vertical transform, transposed (16, 8) for the horizontal one.
+    kr = wp.tile_load(k_rows, shape=(8, 16))
+    nr = wp.tile_load(n_rows, shape=(8, 16))
+    nc = wp.tile_load(n_cols, shape=(16, 8))
+    kc = wp.tile_load(k_cols, shape=(16, 8))
+    v_cos = wp.tile_map(basis_cos, kr, nr, wp.tile_full(shape=(8, 16), value=sy, dtype=wp.float32))
+    v_sin = wp.tile_map(basis_sin, kr, nr, wp.tile_full(shape=(8, 16), value=sy, dtype=wp.float32))
+    h_cos = wp.tile_map(basis_cos, kc, nc, wp.tile_full(shape=(16, 8), value=sx, dtype=wp.float32))
+    h_sin = wp.tile_map(basis_sin, kc, nc, wp.tile_full(shape=(16, 8), value=sx, dtype=wp.float32))
+    parity = (itl_y & 1) * 2 + (itl_x & 1)
+    kny = kernel_node(cy, kernel_rows)
+    knx = kernel_node(cx, kernel_cols)
+    for u in range(colour_list.shape[0]):
+        colour = colour_list[u]
+        x = wp.tile_map(wp.mul, window, wp.tile_load(masks[parity * colours + colour], shape=(16, 16)))
+        t_cos = wp.tile_matmul(x, h_cos)  # (16, 8): horizontal cosine transform of every row
+        t_sin = wp.tile_matmul(x, h_sin)
+        f0 = wp.tile_matmul(v_cos, t_cos)  # CC
+        f1 = wp.tile_matmul(v_cos, t_sin)  # SC
+        f2 = wp.tile_matmul(v_sin, t_cos)  # CS
+        f3 = wp.tile_matmul(v_sin, t_sin)  # SS
+        out = dest_base + 4 * u
+        if use_kernels:
+            kb = (((cam * kernel_rows + kny) * kernel_cols + knx) * colours + colour) * 4
+            k0 = wp.tile_load(kernels[kb + 0], shape=(8, 8))
+            k1 = wp.tile_load(kernels[kb + 1], shape=(8, 8))
+            k2 = wp.tile_load(kernels[kb + 2], shape=(8, 8))
+            k3 = wp.tile_load(kernels[kb + 3], shape=(8, 8))
+            wp.tile_store(dest[out + 0], wp.tile_map(kmul_cc, k0, k1, k2, k3, f0, f1, f2, f3))
+            wp.tile_store(dest[out + 1], wp.tile_map(kmul_sc, k0, k1, k2, k3, f0, f1, f2, f3))
+            wp.tile_store(dest[out + 2], wp.tile_map(kmul_cs, k0, k1, k2, k3, f0, f1, f2, f3))
+            wp.tile_store(dest[out + 3], wp.tile_map(kmul_ss, k0, k1, k2, k3, f0, f1, f2, f3))
+        else:
+            wp.tile_store(dest[out + 0], f0)
+            wp.tile_store(dest[out + 1], f1)
+            wp.tile_store(dest[out + 2], f2)
+            wp.tile_store(dest[out + 3], f3)
+    return finite, inside
+
+
 # --- kernel -------------------------------------------------------------------------------------------------
 @wp.kernel
 def convert_tiles(
@@ -91,81 +179,32 @@ def convert_tiles(
     use_kernels: bool,
     image_height: int,
     image_width: int,
-    colours: int,
+    colour_list: wp.array(dtype=wp.int32),
     clt: wp.array3d(dtype=wp.float32),
     finite: wp.array(dtype=wp.bool),
     valid: wp.array(dtype=wp.bool),
 ):
     """One block per tile. padded: (cams, H + 36, W + 36); centres: (tiles, cams, 2); masks: (4 * colours, 16, 16)
     [parity_y, parity_x, colour]; k_rows/n_rows: (8, 16) and n_cols/k_cols: (16, 8) index tables; kernels:
-    (cams * kernel_rows * kernel_cols * colours * 4, 8, 8); clt out as in the module docstring; finite/valid:
-    (tiles,) - finite: every window and centre finite (else the tile's CLT is zero); valid: finite, active and
-    every window wholly inside the image (else its pixels were read pair-clamped)."""
+    (cams * kernel_rows * kernel_cols * colours * 4, 8, 8); colour_list: (colours,) 0..colours-1; clt out as in
+    the module docstring; finite/valid: (tiles,) - finite: every window and centre finite (else the tile's CLT
+    is zero); valid: finite, active and every window wholly inside the image (else its pixels were read
+    pair-clamped)."""
     tile = wp.tid()
     if not active[tile]:
         finite[tile] = False
         valid[tile] = False
         return
     cams = centres.shape[1]
+    colours = colour_list.shape[0]
     all_finite = bool(True)
     all_inside = bool(True)
-    kr = wp.tile_load(k_rows, shape=(8, 16))
-    nr = wp.tile_load(n_rows, shape=(8, 16))
-    nc = wp.tile_load(n_cols, shape=(16, 8))
-    kc = wp.tile_load(k_cols, shape=(16, 8))
     for cam in range(cams):
-        cx = centres[tile, cam, 0]
-        cy = centres[tile, cam, 1]
-        if not (wp.isfinite(cx) and wp.isfinite(cy)):
-            all_finite = False
-            cx = 0.0
-            cy = 0.0
-        px = wp.clamp(cx, -CENTRE_LIMIT, CENTRE_LIMIT) - float(HALF_WINDOW)
-        py = wp.clamp(cy, -CENTRE_LIMIT, CENTRE_LIMIT) - float(HALF_WINDOW)
-        itl_x = int(wp.floor(px + 0.5))
-        itl_y = int(wp.floor(py + 0.5))
-        sx = float(itl_x) - px
-        sy = float(itl_y) - py
-        if itl_x < 0 or itl_y < 0 or itl_x + 16 > image_width or itl_y + 16 > image_height:
-            all_inside = False
-        window = wp.tile_load(
-            padded[cam], shape=(16, 16), offset=(window_corner(itl_y, image_height), window_corner(itl_x, image_width))
+        cam_finite, cam_inside = convert_camera(
+            padded, centres, tile, cam, masks, k_rows, n_rows, n_cols, k_cols, kernels, kernel_rows, kernel_cols,
+            use_kernels, image_height, image_width, colours, colour_list, clt, (tile * cams + cam) * colours * 4,
         )
-        bad = wp.tile_sum(wp.tile_map(non_finite, window))
-        if wp.tile_extract(bad, 0) > 0.0:
-            all_finite = False
-        window = wp.tile_map(finite_or_zero, window)
-        # Per-axis bases: rows (8, 16) for the vertical transform, transposed (16, 8) for the horizontal one.
-        v_cos = wp.tile_map(basis_cos, kr, nr, wp.tile_full(shape=(8, 16), value=sy, dtype=wp.float32))
-        v_sin = wp.tile_map(basis_sin, kr, nr, wp.tile_full(shape=(8, 16), value=sy, dtype=wp.float32))
-        h_cos = wp.tile_map(basis_cos, kc, nc, wp.tile_full(shape=(16, 8), value=sx, dtype=wp.float32))
-        h_sin = wp.tile_map(basis_sin, kc, nc, wp.tile_full(shape=(16, 8), value=sx, dtype=wp.float32))
-        parity = (itl_y & 1) * 2 + (itl_x & 1)
-        kny = kernel_node(cy, kernel_rows)
-        knx = kernel_node(cx, kernel_cols)
-        for colour in range(colours):
-            x = wp.tile_map(wp.mul, window, wp.tile_load(masks[parity * colours + colour], shape=(16, 16)))
-            t_cos = wp.tile_matmul(x, h_cos)  # (16, 8): horizontal cosine transform of every row
-            t_sin = wp.tile_matmul(x, h_sin)
-            f0 = wp.tile_matmul(v_cos, t_cos)  # CC
-            f1 = wp.tile_matmul(v_cos, t_sin)  # SC
-            f2 = wp.tile_matmul(v_sin, t_cos)  # CS
-            f3 = wp.tile_matmul(v_sin, t_sin)  # SS
-            out = ((tile * cams + cam) * colours + colour) * 4
-            if use_kernels:
-                kb = (((cam * kernel_rows + kny) * kernel_cols + knx) * colours + colour) * 4
-                k0 = wp.tile_load(kernels[kb + 0], shape=(8, 8))
-                k1 = wp.tile_load(kernels[kb + 1], shape=(8, 8))
-                k2 = wp.tile_load(kernels[kb + 2], shape=(8, 8))
-                k3 = wp.tile_load(kernels[kb + 3], shape=(8, 8))
-                wp.tile_store(clt[out + 0], wp.tile_map(kmul_cc, k0, k1, k2, k3, f0, f1, f2, f3))
-                wp.tile_store(clt[out + 1], wp.tile_map(kmul_sc, k0, k1, k2, k3, f0, f1, f2, f3))
-                wp.tile_store(clt[out + 2], wp.tile_map(kmul_cs, k0, k1, k2, k3, f0, f1, f2, f3))
-                wp.tile_store(clt[out + 3], wp.tile_map(kmul_ss, k0, k1, k2, k3, f0, f1, f2, f3))
-            else:
-                wp.tile_store(clt[out + 0], f0)
-                wp.tile_store(clt[out + 1], f1)
-                wp.tile_store(clt[out + 2], f2)
-                wp.tile_store(clt[out + 3], f3)
+        all_finite = all_finite and cam_finite
+        all_inside = all_inside and cam_inside
     finite[tile] = all_finite
     valid[tile] = all_finite and all_inside

@@ -59,6 +59,82 @@ def axpy(w: float, x: float, y: float) -> float:
     return w * x + y
 
 
+@wp.func
+def correlate_pair(
+    src: wp.array3d(dtype=wp.float32),
+    base_a: int,
+    base_b: int,
+    used: wp.array(dtype=wp.int32),
+    positions: wp.array(dtype=wp.int32),
+    weights: wp.array(dtype=wp.float32),
+    colours: int,
+    fat_zero: float,
+    lpf_rb: wp.array2d(dtype=wp.float32),
+    lpf_corr: wp.array2d(dtype=wp.float32),
+    lags_cos: wp.array2d(dtype=wp.float32),
+    lags_sin: wp.array2d(dtype=wp.float32),
+    freqs_cos: wp.array2d(dtype=wp.float32),
+    freqs_sin: wp.array2d(dtype=wp.float32),
+    corr: wp.array3d(dtype=wp.float32),
+    out: int,
+):
+    """corr[out] (15, 15): the phase correlation of the tiles at src[base_a + 4 positions[u] + q] and
+    src[base_b + ...] over the used colours u (colour used[u] of ``colours``, weight weights[u])."""
+    x0 = wp.tile_zeros(shape=(8, 8), dtype=wp.float32)
+    x1 = wp.tile_zeros(shape=(8, 8), dtype=wp.float32)
+    x2 = wp.tile_zeros(shape=(8, 8), dtype=wp.float32)
+    x3 = wp.tile_zeros(shape=(8, 8), dtype=wp.float32)
+    for u in range(used.shape[0]):
+        ia = base_a + 4 * positions[u]
+        ib = base_b + 4 * positions[u]
+        a0 = wp.tile_load(src[ia + 0], shape=(8, 8))
+        a1 = wp.tile_load(src[ia + 1], shape=(8, 8))
+        a2 = wp.tile_load(src[ia + 2], shape=(8, 8))
+        a3 = wp.tile_load(src[ia + 3], shape=(8, 8))
+        b0 = wp.tile_load(src[ib + 0], shape=(8, 8))
+        b1 = wp.tile_load(src[ib + 1], shape=(8, 8))
+        b2 = wp.tile_load(src[ib + 2], shape=(8, 8))
+        b3 = wp.tile_load(src[ib + 3], shape=(8, 8))
+        w = wp.tile_full(shape=(8, 8), value=weights[u], dtype=wp.float32)
+        x0 = wp.tile_map(axpy, w, wp.tile_map(xcorr_cc, a0, a1, a2, a3, b0, b1, b2, b3), x0)
+        x1 = wp.tile_map(axpy, w, wp.tile_map(xcorr_sc, a0, a1, a2, a3, b0, b1, b2, b3), x1)
+        x2 = wp.tile_map(axpy, w, wp.tile_map(xcorr_cs, a0, a1, a2, a3, b0, b1, b2, b3), x2)
+        x3 = wp.tile_map(axpy, w, wp.tile_map(xcorr_ss, a0, a1, a2, a3, b0, b1, b2, b3), x3)
+        # R and B accumulated: their low-pass (§6.2), before green (the last colour) is added
+        next_colour = 2
+        if u + 1 < used.shape[0]:
+            next_colour = used[u + 1]
+        if colours == 3 and used[u] < 2 and next_colour == 2:
+            rb = wp.tile_load(lpf_rb, shape=(8, 8))
+            x0 = wp.tile_map(wp.mul, x0, rb)
+            x1 = wp.tile_map(wp.mul, x1, rb)
+            x2 = wp.tile_map(wp.mul, x2, rb)
+            x3 = wp.tile_map(wp.mul, x3, rb)
+    lc = wp.tile_load(lpf_corr, shape=(8, 8))
+    scale = wp.tile_map(inverse_norm, x0, x1, x2, x3, wp.tile_full(shape=(8, 8), value=fat_zero, dtype=wp.float32))
+    x0 = wp.tile_map(mul3, x0, scale, lc)
+    x1 = wp.tile_map(mul3, x1, scale, lc)
+    x2 = wp.tile_map(mul3, x2, scale, lc)
+    x3 = wp.tile_map(mul3, x3, scale, lc)
+    # Back to lags: R = sum_q L_{q>>1} X_q L_{q&1}^T (rows: vertical sine iff q>>1; columns: sine iff q&1).
+    lag_c = wp.tile_load(lags_cos, shape=(CORR_SIDE, 8))
+    lag_s = wp.tile_load(lags_sin, shape=(CORR_SIDE, 8))
+    frq_c = wp.tile_load(freqs_cos, shape=(8, CORR_SIDE))
+    frq_s = wp.tile_load(freqs_sin, shape=(8, CORR_SIDE))
+    result = wp.tile_zeros(shape=(CORR_SIDE, CORR_SIDE), dtype=wp.float32)
+    wp.tile_matmul(lag_c, wp.tile_matmul(x0, frq_c), result)
+    wp.tile_matmul(lag_c, wp.tile_matmul(x1, frq_s), result)
+    wp.tile_matmul(lag_s, wp.tile_matmul(x2, frq_c), result)
+    wp.tile_matmul(lag_s, wp.tile_matmul(x3, frq_s), result)
+    wp.tile_store(corr[out], result)
+
+
+@wp.func
+def zero_correlations(corr: wp.array3d(dtype=wp.float32), first: int, count: int):
+    for i in range(count):
+        wp.tile_store(corr[first + i], wp.tile_zeros(shape=(CORR_SIDE, CORR_SIDE), dtype=wp.float32))
+
+
 @wp.kernel
 def correlate_tiles(
     clt: wp.array3d(dtype=wp.float32),
@@ -66,7 +142,8 @@ def correlate_tiles(
     pairs: wp.array2d(dtype=wp.int32),
     cams: int,
     colours: int,
-    colour_weights: wp.array(dtype=wp.float32),
+    used: wp.array(dtype=wp.int32),
+    weights: wp.array(dtype=wp.float32),
     fat_zero: float,
     lpf_rb: wp.array2d(dtype=wp.float32),
     lpf_corr: wp.array2d(dtype=wp.float32),
@@ -76,60 +153,19 @@ def correlate_tiles(
     freqs_sin: wp.array2d(dtype=wp.float32),
     corr: wp.array3d(dtype=wp.float32),
 ):
-    """One block per tile. pairs: (P, 2) camera indices (first, second); colour_weights: (colours,);
-    lpf_*: (8, 8); lags_*: (15, 8) = 1/2 x unfold x DCT-II-e / DST-II-e, freqs_* = their transposes (8, 15);
-    corr out: (tiles * P, 15, 15), zero for tiles whose CLT is not finite."""
+    """One block per tile. pairs: (P, 2) camera indices (first, second); used/weights: (U,) the colours of
+    non-zero weight (ascending) and their weights; lpf_*: (8, 8); lags_*: (15, 8) = 1/2 x unfold x DCT-II-e /
+    DST-II-e, freqs_* = their transposes (8, 15); corr out: (tiles * P, 15, 15), zero for tiles whose CLT is not
+    finite."""
     tile = wp.tid()
     npairs = pairs.shape[0]
     if not finite[tile]:
-        for p in range(npairs):
-            wp.tile_store(corr[tile * npairs + p], wp.tile_zeros(shape=(CORR_SIDE, CORR_SIDE), dtype=wp.float32))
+        zero_correlations(corr, tile * npairs, npairs)
         return
-    rb = wp.tile_load(lpf_rb, shape=(8, 8))
-    lc = wp.tile_load(lpf_corr, shape=(8, 8))
-    lag_c = wp.tile_load(lags_cos, shape=(CORR_SIDE, 8))
-    lag_s = wp.tile_load(lags_sin, shape=(CORR_SIDE, 8))
-    frq_c = wp.tile_load(freqs_cos, shape=(8, CORR_SIDE))
-    frq_s = wp.tile_load(freqs_sin, shape=(8, CORR_SIDE))
-    fz = wp.tile_full(shape=(8, 8), value=fat_zero, dtype=wp.float32)
     for p in range(npairs):
-        x0 = wp.tile_zeros(shape=(8, 8), dtype=wp.float32)
-        x1 = wp.tile_zeros(shape=(8, 8), dtype=wp.float32)
-        x2 = wp.tile_zeros(shape=(8, 8), dtype=wp.float32)
-        x3 = wp.tile_zeros(shape=(8, 8), dtype=wp.float32)
-        for colour in range(colours):
-            ia = ((tile * cams + pairs[p, 0]) * colours + colour) * 4
-            ib = ((tile * cams + pairs[p, 1]) * colours + colour) * 4
-            a0 = wp.tile_load(clt[ia + 0], shape=(8, 8))
-            a1 = wp.tile_load(clt[ia + 1], shape=(8, 8))
-            a2 = wp.tile_load(clt[ia + 2], shape=(8, 8))
-            a3 = wp.tile_load(clt[ia + 3], shape=(8, 8))
-            b0 = wp.tile_load(clt[ib + 0], shape=(8, 8))
-            b1 = wp.tile_load(clt[ib + 1], shape=(8, 8))
-            b2 = wp.tile_load(clt[ib + 2], shape=(8, 8))
-            b3 = wp.tile_load(clt[ib + 3], shape=(8, 8))
-            w = wp.tile_full(shape=(8, 8), value=colour_weights[colour], dtype=wp.float32)
-            x0 = wp.tile_map(axpy, w, wp.tile_map(xcorr_cc, a0, a1, a2, a3, b0, b1, b2, b3), x0)
-            x1 = wp.tile_map(axpy, w, wp.tile_map(xcorr_sc, a0, a1, a2, a3, b0, b1, b2, b3), x1)
-            x2 = wp.tile_map(axpy, w, wp.tile_map(xcorr_cs, a0, a1, a2, a3, b0, b1, b2, b3), x2)
-            x3 = wp.tile_map(axpy, w, wp.tile_map(xcorr_ss, a0, a1, a2, a3, b0, b1, b2, b3), x3)
-            if colours == 3 and colour == 1:  # R and B accumulated: their low-pass (§6.2)
-                x0 = wp.tile_map(wp.mul, x0, rb)
-                x1 = wp.tile_map(wp.mul, x1, rb)
-                x2 = wp.tile_map(wp.mul, x2, rb)
-                x3 = wp.tile_map(wp.mul, x3, rb)
-        scale = wp.tile_map(inverse_norm, x0, x1, x2, x3, fz)
-        x0 = wp.tile_map(mul3, x0, scale, lc)
-        x1 = wp.tile_map(mul3, x1, scale, lc)
-        x2 = wp.tile_map(mul3, x2, scale, lc)
-        x3 = wp.tile_map(mul3, x3, scale, lc)
-        # Back to lags: R = sum_q L_{q>>1} X_q L_{q&1}^T (rows: vertical sine iff q>>1; columns: sine iff q&1).
-        out = wp.tile_zeros(shape=(CORR_SIDE, CORR_SIDE), dtype=wp.float32)
-        wp.tile_matmul(lag_c, wp.tile_matmul(x0, frq_c), out)
-        wp.tile_matmul(lag_c, wp.tile_matmul(x1, frq_s), out)
-        wp.tile_matmul(lag_s, wp.tile_matmul(x2, frq_c), out)
-        wp.tile_matmul(lag_s, wp.tile_matmul(x3, frq_s), out)
-        wp.tile_store(corr[tile * npairs + p], out)
+        correlate_pair(clt, (tile * cams + pairs[p, 0]) * colours * 4, (tile * cams + pairs[p, 1]) * colours * 4,
+                       used, used, weights, colours, fat_zero, lpf_rb, lpf_corr, lags_cos, lags_sin, freqs_cos,
+                       freqs_sin, corr, tile * npairs + p)
 
 
 @wp.func

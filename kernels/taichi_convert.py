@@ -4,35 +4,33 @@
 The same math, arguments and layouts as the Warp kernel (see there): integer window pick from the pair-clamped
 padded frame, per colour the Bayer mask, the forward MCLT as two separable products with the closed-form basis
 of §3.1 / §13 (shifted half-sine window, fold, DCT-IV/DST-IV and the phase rotation in one 8x16 matrix per axis),
-then the optional aberration-kernel product (§5.2). Masked-out pixels (zero mask) are skipped, so a Bayer colour
-costs a quarter (R, B) or a half (G) of the row products.
+then the optional aberration-kernel product (§5.2). The per-camera pieces are ``ti.func``s that the split kernel
+here and the fused kernel (kernels/taichi_fused.py) both call.
+
+Speed (CPU): the basis of a shift s is built by angle addition from shift-free constant tables
+(``operators.shifted_basis_parts``, uploaded by the processor): one sine and cosine per axis instead of 256. A colour's rows are streamed:
+each image row's horizontal transform (only the columns of that colour's parity, the Bayer masks being 2-periodic
+along a row) is added into the 16 x 16 result at once, so no intermediate tile is kept; rows without the colour
+are skipped.
 
 Layouts: ``clt`` (tiles * cams * colours * 4, 8, 8) = [tile, cam, colour, q]; bool masks are passed as uint8
-views of the processor's bool tensors.
+views of the processor's bool tensors. The 16 x 16 product ``g`` of one colour is [vertical cos | sin,
+horizontal cos | sin]: quadrant q = 2 (vertical sine) + (horizontal sine) is ``g[8 (q >> 1) + ky, 8 (q & 1) + kx]``.
 """
 
 import taichi as ti
 
 from tpnet_gpu.kernels.frames import CENTRE_LIMIT, HALF_WINDOW, WINDOW
 from tpnet_gpu.kernels.taichi_frames import window_corner
-from tpnet_gpu.kernels.taichi_types import F32_3D, U8_1D
+from tpnet_gpu.kernels.taichi_types import F32_2D, F32_3D, U8_1D
 from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
+
+# Where one camera's window lies: padded-frame corner, residual shifts, Bayer parity, kernel-grid node, flags.
+CameraWindow = ti.types.struct(oy=ti.i32, ox=ti.i32, sx=ti.f32, sy=ti.f32, parity=ti.i32, kny=ti.i32, knx=ti.i32,
+                               finite=ti.i32, inside=ti.i32)
 
 
 # --- element functions --------------------------------------------------------------------------------------
-@ti.func
-def basis_angle(k: ti.i32, n: ti.i32, s: ti.f32) -> ti.f32:
-    """omega_k (n + s + 4.5) with the integer part of the phase reduced exactly mod 2 pi (as the Warp basis)."""
-    whole = ((2 * k + 1) * (2 * n + 9)) % 64
-    return ti.math.pi * ti.cast(whole, ti.f32) / 32.0 + ti.math.pi * ti.cast(2 * k + 1, ti.f32) * s / 16.0
-
-
-@ti.func
-def half_window(n: ti.i32, s: ti.f32) -> ti.f32:
-    """1/2 w(n + s), the shifted half-sine window."""
-    return 0.5 * ti.sin(ti.math.pi * (2.0 * (ti.cast(n, ti.f32) + s) + 1.0) / 32.0)
-
-
 @ti.func
 def is_finite(v: ti.f32) -> bool:
     return ti.abs(v) <= 3.4028234e38  # False for NaN and +-inf
@@ -44,6 +42,128 @@ def kernel_node(position: ti.f32, nodes: ti.i32) -> ti.i32:
     return ti.math.clamp(ti.i32(ti.floor(position / 16.0)) + 1, 0, nodes - 1)
 
 
+@ti.func
+def camera_window(centres: ti.template(), tile: ti.i32, cam: ti.i32, image_height: ti.i32, image_width: ti.i32,
+                  kernel_rows: ti.i32, kernel_cols: ti.i32) -> CameraWindow:
+    """The window of camera ``cam`` at ``tile`` (a non-finite centre reads at 0 and clears ``finite``)."""
+    cx = centres[tile, cam, 0]
+    cy = centres[tile, cam, 1]
+    finite = 1
+    if not (is_finite(cx) and is_finite(cy)):
+        finite = 0
+        cx = 0.0
+        cy = 0.0
+    px = ti.math.clamp(cx, -CENTRE_LIMIT, CENTRE_LIMIT) - float(HALF_WINDOW)
+    py = ti.math.clamp(cy, -CENTRE_LIMIT, CENTRE_LIMIT) - float(HALF_WINDOW)
+    itl_x = ti.i32(ti.floor(px + 0.5))
+    itl_y = ti.i32(ti.floor(py + 0.5))
+    inside = 1
+    if itl_x < 0 or itl_y < 0 or itl_x + WINDOW > image_width or itl_y + WINDOW > image_height:
+        inside = 0
+    return CameraWindow(oy=window_corner(itl_y, image_height), ox=window_corner(itl_x, image_width),
+                        sx=ti.cast(itl_x, ti.f32) - px, sy=ti.cast(itl_y, ti.f32) - py,
+                        parity=(itl_y & 1) * 2 + (itl_x & 1), kny=kernel_node(cy, kernel_rows),
+                        knx=kernel_node(cx, kernel_cols), finite=finite, inside=inside)
+
+
+@ti.func
+def window_finite(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32) -> ti.i32:
+    """1 when every pixel of the 16 x 16 window at (oy, ox) is finite."""
+    finite = 1
+    for r in range(WINDOW):
+        for c in ti.static(range(WINDOW)):
+            if not is_finite(padded[cam, oy + r, ox + c]):
+                finite = 0
+    return finite
+
+
+@ti.func
+def axis_basis(s: ti.f32, window_parts: ti.template(), phase_parts: ti.template()):
+    """(16, 16) [n, j]: 1/2 w(n + s) cos(omega_k (n + s + 4.5)) for j = k < 8, the sine for j = 8 + k, by angle
+    addition from window_parts (2, 16) and phase_parts (2, 8, 16) (``operators.shifted_basis_parts``)."""
+    theta = ti.math.pi * s / 16.0
+    c1 = ti.cos(theta)
+    s1 = ti.sin(theta)
+    c2 = c1 * c1 - s1 * s1  # rotation by 2 theta: cos / sin of (2k + 1) theta for k = 0..7 by recurrence
+    s2 = 2.0 * s1 * c1
+    ck = ti.Vector.zero(ti.f32, N)
+    sk = ti.Vector.zero(ti.f32, N)
+    ck[0] = c1
+    sk[0] = s1
+    for k in ti.static(range(1, N)):
+        ck[k] = ck[k - 1] * c2 - sk[k - 1] * s2
+        sk[k] = sk[k - 1] * c2 + ck[k - 1] * s2
+    basis = ti.Matrix.zero(ti.f32, WINDOW, WINDOW)
+    for n in range(WINDOW):
+        half_w = 0.5 * (window_parts[0, n] * c1 + window_parts[1, n] * s1)
+        for k in ti.static(range(N)):
+            cos_phi = phase_parts[0, k, n]
+            sin_phi = phase_parts[1, k, n]
+            basis[n, k] = half_w * (cos_phi * ck[k] - sin_phi * sk[k])
+            basis[n, N + k] = half_w * (sin_phi * ck[k] + cos_phi * sk[k])
+    return basis
+
+
+@ti.func
+def forward_colour(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32, masks: ti.template(), mask: ti.i32,
+                   bx: ti.template(), by: ti.template()):
+    """(16, 16) ``g`` of one colour (module docstring): sum over rows r of by[r, :]^T (x[r, :] bx), x the masked
+    window; a row reads only the columns its mask weights (even, odd or both parities), non-finite pixels as 0."""
+    g = ti.Matrix.zero(ti.f32, WINDOW, WINDOW)
+    for r in range(WINDOW):
+        w_even = masks[mask, r, 0]
+        w_odd = masks[mask, r, 1]
+        if w_even != 0.0 or w_odd != 0.0:
+            t = ti.Vector.zero(ti.f32, WINDOW)  # horizontal transform of row r: [cos k | sin k]
+            for phase in ti.static(range(2)):
+                weight = masks[mask, r, phase]
+                if weight != 0.0:
+                    for j in ti.static(range(N)):
+                        v = padded[cam, oy + r, ox + 2 * j + phase]
+                        x = ti.select(is_finite(v), weight * v, 0.0)
+                        for k in ti.static(range(WINDOW)):
+                            t[k] += x * bx[2 * j + phase, k]
+            for i in ti.static(range(WINDOW)):
+                b = by[r, i]
+                for k in ti.static(range(WINDOW)):
+                    g[i, k] += b * t[k]
+    return g
+
+
+@ti.func
+def store_clt(g: ti.template(), kernels: ti.template(), kb: ti.i32, use_kernels: ti.i32, dest: ti.template(),
+              out: ti.i32):
+    """Write ``g``'s 4 quadrants to dest[out + q], times the aberration kernel kernels[kb + q] (bicomplex, §5.2)
+    when ``use_kernels``."""
+    for ky in range(N):
+        for kx in ti.static(range(N)):
+            f0 = g[ky, kx]  # CC
+            f1 = g[ky, N + kx]  # SC (horizontal sine)
+            f2 = g[N + ky, kx]  # CS (vertical sine)
+            f3 = g[N + ky, N + kx]  # SS
+            if use_kernels:
+                k0 = kernels[kb + 0, ky, kx]
+                k1 = kernels[kb + 1, ky, kx]
+                k2 = kernels[kb + 2, ky, kx]
+                k3 = kernels[kb + 3, ky, kx]
+                dest[out + 0, ky, kx] = k0 * f0 - k1 * f1 - k2 * f2 + k3 * f3
+                dest[out + 1, ky, kx] = k0 * f1 + k1 * f0 - k2 * f3 - k3 * f2
+                dest[out + 2, ky, kx] = k0 * f2 + k2 * f0 - k1 * f3 - k3 * f1
+                dest[out + 3, ky, kx] = k0 * f3 + k3 * f0 + k1 * f2 + k2 * f1
+            else:
+                dest[out + 0, ky, kx] = f0
+                dest[out + 1, ky, kx] = f1
+                dest[out + 2, ky, kx] = f2
+                dest[out + 3, ky, kx] = f3
+
+
+@ti.func
+def kernel_base(cam: ti.i32, win: ti.template(), kernel_rows: ti.i32, kernel_cols: ti.i32, colours: ti.i32,
+                colour: ti.i32) -> ti.i32:
+    """First of the 4 kernel quadrants of (cam, the window's kernel-grid node, colour)."""
+    return (((cam * kernel_rows + win.kny) * kernel_cols + win.knx) * colours + colour) * 4
+
+
 # --- kernel -------------------------------------------------------------------------------------------------
 @ti.kernel
 def convert_tiles(
@@ -51,6 +171,8 @@ def convert_tiles(
     centres: F32_3D,
     active: U8_1D,
     masks: F32_3D,
+    window_parts: F32_2D,
+    phase_parts: F32_3D,
     kernels: F32_3D,
     kernel_rows: ti.i32,
     kernel_cols: ti.i32,
@@ -62,8 +184,9 @@ def convert_tiles(
     finite: U8_1D,
     valid: U8_1D,
 ):
-    """One thread per tile; arguments as kernels/convert.convert_tiles (the index tables are not needed: the
-    bases are evaluated in place). finite/valid out: (tiles,) uint8."""
+    """One thread per tile; arguments as kernels/convert.convert_tiles except the bases: window_parts (2, 16) and
+    phase_parts (2, 8, 16) of ``operators.shifted_basis_parts`` instead of the index tables; masks must be 2-periodic along rows (Bayer or mono). finite/valid out:
+    (tiles,) uint8."""
     cams = centres.shape[1]
     for tile in range(centres.shape[0]):
         all_finite = 1
@@ -73,88 +196,14 @@ def convert_tiles(
             all_inside = 0
         else:
             for cam in range(cams):
-                cx = centres[tile, cam, 0]
-                cy = centres[tile, cam, 1]
-                if not (is_finite(cx) and is_finite(cy)):
-                    all_finite = 0
-                    cx = 0.0
-                    cy = 0.0
-                px = ti.math.clamp(cx, -CENTRE_LIMIT, CENTRE_LIMIT) - float(HALF_WINDOW)
-                py = ti.math.clamp(cy, -CENTRE_LIMIT, CENTRE_LIMIT) - float(HALF_WINDOW)
-                itl_x = ti.i32(ti.floor(px + 0.5))
-                itl_y = ti.i32(ti.floor(py + 0.5))
-                sx = ti.cast(itl_x, ti.f32) - px
-                sy = ti.cast(itl_y, ti.f32) - py
-                if itl_x < 0 or itl_y < 0 or itl_x + WINDOW > image_width or itl_y + WINDOW > image_height:
-                    all_inside = 0
-                oy = window_corner(itl_y, image_height)
-                ox = window_corner(itl_x, image_width)
-                for r, c in ti.ndrange(WINDOW, WINDOW):
-                    if not is_finite(padded[cam, oy + r, ox + c]):
-                        all_finite = 0
-                # Per-axis bases: h_* [n, kx] for the horizontal transform, v_* [ky, n] for the vertical one.
-                h_cos = ti.Matrix.zero(ti.f32, WINDOW, N)
-                h_sin = ti.Matrix.zero(ti.f32, WINDOW, N)
-                v_cos = ti.Matrix.zero(ti.f32, N, WINDOW)
-                v_sin = ti.Matrix.zero(ti.f32, N, WINDOW)
-                for n in range(WINDOW):
-                    wx = half_window(n, sx)
-                    wy = half_window(n, sy)
-                    for k in ti.static(range(N)):
-                        ax = basis_angle(k, n, sx)
-                        ay = basis_angle(k, n, sy)
-                        h_cos[n, k] = wx * ti.cos(ax)
-                        h_sin[n, k] = wx * ti.sin(ax)
-                        v_cos[k, n] = wy * ti.cos(ay)
-                        v_sin[k, n] = wy * ti.sin(ay)
-                parity = (itl_y & 1) * 2 + (itl_x & 1)
-                kny = kernel_node(cy, kernel_rows)
-                knx = kernel_node(cx, kernel_cols)
+                win = camera_window(centres, tile, cam, image_height, image_width, kernel_rows, kernel_cols)
+                all_finite *= win.finite * window_finite(padded, cam, win.oy, win.ox)
+                all_inside *= win.inside
+                bx = axis_basis(win.sx, window_parts, phase_parts)
+                by = axis_basis(win.sy, window_parts, phase_parts)
                 for colour in range(colours):
-                    mask = parity * colours + colour
-                    # Horizontal transform of every row: t_* [row, kx] = sum_m x[row, m] h_*[m, kx].
-                    t_cos = ti.Matrix.zero(ti.f32, WINDOW, N)
-                    t_sin = ti.Matrix.zero(ti.f32, WINDOW, N)
-                    for r in range(WINDOW):
-                        for c in range(WINDOW):
-                            weight = masks[mask, r, c]
-                            if weight != 0.0:
-                                v = padded[cam, oy + r, ox + c]
-                                if not is_finite(v):
-                                    v = 0.0
-                                x = weight * v
-                                for k in ti.static(range(N)):
-                                    t_cos[r, k] += x * h_cos[c, k]
-                                    t_sin[r, k] += x * h_sin[c, k]
-                    out = ((tile * cams + cam) * colours + colour) * 4
-                    kb = (((cam * kernel_rows + kny) * kernel_cols + knx) * colours + colour) * 4
-                    for ky in range(N):
-                        f0 = ti.Vector.zero(ti.f32, N)  # CC
-                        f1 = ti.Vector.zero(ti.f32, N)  # SC (horizontal sine)
-                        f2 = ti.Vector.zero(ti.f32, N)  # CS (vertical sine)
-                        f3 = ti.Vector.zero(ti.f32, N)  # SS
-                        for r in range(WINDOW):
-                            vc = v_cos[ky, r]
-                            vs = v_sin[ky, r]
-                            for k in ti.static(range(N)):
-                                f0[k] += vc * t_cos[r, k]
-                                f1[k] += vc * t_sin[r, k]
-                                f2[k] += vs * t_cos[r, k]
-                                f3[k] += vs * t_sin[r, k]
-                        for k in ti.static(range(N)):
-                            if use_kernels:  # bicomplex product K * F (§5.2)
-                                k0 = kernels[kb + 0, ky, k]
-                                k1 = kernels[kb + 1, ky, k]
-                                k2 = kernels[kb + 2, ky, k]
-                                k3 = kernels[kb + 3, ky, k]
-                                clt[out + 0, ky, k] = k0 * f0[k] - k1 * f1[k] - k2 * f2[k] + k3 * f3[k]
-                                clt[out + 1, ky, k] = k0 * f1[k] + k1 * f0[k] - k2 * f3[k] - k3 * f2[k]
-                                clt[out + 2, ky, k] = k0 * f2[k] + k2 * f0[k] - k1 * f3[k] - k3 * f1[k]
-                                clt[out + 3, ky, k] = k0 * f3[k] + k3 * f0[k] + k1 * f2[k] + k2 * f1[k]
-                            else:
-                                clt[out + 0, ky, k] = f0[k]
-                                clt[out + 1, ky, k] = f1[k]
-                                clt[out + 2, ky, k] = f2[k]
-                                clt[out + 3, ky, k] = f3[k]
+                    g = forward_colour(padded, cam, win.oy, win.ox, masks, win.parity * colours + colour, bx, by)
+                    store_clt(g, kernels, kernel_base(cam, win, kernel_rows, kernel_cols, colours, colour),
+                              use_kernels, clt, ((tile * cams + cam) * colours + colour) * 4)
         finite[tile] = ti.u8(all_finite)
         valid[tile] = ti.u8(all_finite * all_inside)

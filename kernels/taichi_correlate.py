@@ -1,21 +1,43 @@
 """Taichi twin of kernels/correlate.py: CLT tiles of camera pairs -> pixel-domain phase correlations
 (tile_processor.md §6), and the network's 4 layers (network.md §1).
 
-``correlate_tiles``, one thread per (tile, pair), spread over every core: per frequency the conjugate bicomplex
-product per colour, the colour weights, the R+B low-pass, the fat-zero normalisation and the final low-pass; then
-the 8-point DCT-II/DST-II per quadrant and the lag unfold as a signed gather into the (2r+1)^2 tile (the same
-operator as the Warp kernel's two dense products, at a quarter of the multiplications). ``network_layers``
-(per element) combines the quad's pairs. Same arguments, tables and layouts as the Warp kernels.
+``correlate_pair`` (a ``ti.func``, called by the split kernel ``correlate_tiles`` here, one thread per (tile,
+pair), and by the fused kernel in kernels/taichi_fused.py): per frequency the conjugate bicomplex product per
+colour, the colour weights, the R+B low-pass, the fat-zero normalisation and the final low-pass; then the 8-point
+DCT-II/DST-II per quadrant and the lag unfold as a signed gather into the (2r+1)^2 tile (the same operator as the
+Warp kernel's two dense products). ``network_layers`` (per element) combines the quad's pairs.
+
+Speed (CPU): colours of zero weight are skipped (the caller passes the used colours); the 8-point transforms and
+the columns' unfold are compile-time constants (``operators.half_dtt2e``, ``operators.unfold_gather``), and each 8-point
+transform folds its input (x_k +- x_{7-k}, the matrices being (anti)symmetric in k with the parity of m), which
+halves its multiplications.
 
 Layouts: ``clt`` (tiles * cams * colours * 4, 8, 8); ``corr`` (tiles * pairs, 15, 15); ``layers``
-(tiles, 4, 9, 9); ``finite`` (tiles,) uint8.
+(tiles, 4, 9, 9); ``finite`` (tiles,) uint8. Spectra are held as one (16, 16) matrix [vertical cos | sin,
+horizontal cos | sin] as in kernels/taichi_convert.py.
 """
 
 import taichi as ti
 
+from tpnet_gpu import operators
 from tpnet_gpu.kernels.correlate import CORR_SIDE, NET_CROP
-from tpnet_gpu.kernels.taichi_types import F32_1D, F32_2D, F32_3D, F32_4D, I32_2D, U8_1D
+from tpnet_gpu.kernels.taichi_types import F32_1D, F32_2D, F32_3D, F32_4D, I32_1D, I32_2D, U8_1D
+from tpnet_gpu.layout import NET_LAYERS, NET_SIDE
 from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
+
+HALF_DTT2E = operators.half_dtt2e().tolist()  # [sine][m][k], compile-time constants
+_INDEX, _SIGN = operators.unfold_gather()
+UNFOLD_INDEX, UNFOLD_SIGN = _INDEX.tolist(), _SIGN.tolist()  # [sine][lag + 7]
+HALF = N // 2
+
+
+def lag_sign(q: int, r: int, c: int) -> float:
+    """Sign of quadrant q's term at lag (r, c) of the unfold gather (the cosine parts' signs are +1)."""
+    return (UNFOLD_SIGN[1][r] if q >> 1 else 1.0) * (UNFOLD_SIGN[1][c] if q & 1 else 1.0)
+
+
+def lag_col(q: int, c: int) -> int:
+    return N * (q & 1) + UNFOLD_INDEX[q & 1][c]
 
 
 @ti.func
@@ -28,6 +50,113 @@ def inverse_norm(x0: ti.f32, x1: ti.f32, x2: ti.f32, x3: ti.f32, fat_zero: ti.f3
     return out
 
 
+@ti.func
+def pair_spectrum(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.template(), positions: ti.template(),
+                  weights: ti.template(), colours: ti.i32, fat_zero: ti.f32, lpf_rb: ti.template(),
+                  lpf_corr: ti.template()):
+    """(16, 16) normalised, low-passed correlation spectrum of the tiles at src[base_a + 4 positions[u] + q] and
+    src[base_b + ...] over the used colours u (colour used[u], weight weights[u])."""
+    x = ti.Matrix.zero(ti.f32, 2 * N, 2 * N)
+    x_rb = ti.Matrix.zero(ti.f32, 2 * N, 2 * N)  # R + B, low-passed before green is added (§6.2)
+    for u in range(used.shape[0]):
+        ia = base_a + 4 * positions[u]
+        ib = base_b + 4 * positions[u]
+        w_rb = ti.select(colours == 3 and used[u] < 2, weights[u], 0.0)
+        w = weights[u] - w_rb
+        for ky in range(N):
+            for kx in ti.static(range(N)):
+                a0 = src[ia + 0, ky, kx]
+                a1 = src[ia + 1, ky, kx]
+                a2 = src[ia + 2, ky, kx]
+                a3 = src[ia + 3, ky, kx]
+                b0 = src[ib + 0, ky, kx]
+                b1 = src[ib + 1, ky, kx]
+                b2 = src[ib + 2, ky, kx]
+                b3 = src[ib + 3, ky, kx]
+                p = ti.Vector([a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3,  # conj(A) * B per frequency (§6.2)
+                               a0 * b1 - a1 * b0 + a2 * b3 - a3 * b2,
+                               a0 * b2 - a2 * b0 + a1 * b3 - a3 * b1,
+                               a0 * b3 + a3 * b0 - a1 * b2 - a2 * b1])
+                for q in ti.static(range(4)):
+                    x[N * (q >> 1) + ky, N * (q & 1) + kx] += w * p[q]
+                if w_rb != 0.0:
+                    for q in ti.static(range(4)):
+                        x_rb[N * (q >> 1) + ky, N * (q & 1) + kx] += w_rb * p[q]
+    for ky in range(N):
+        for kx in ti.static(range(N)):
+            s = ti.Vector.zero(ti.f32, 4)
+            for q in ti.static(range(4)):
+                s[q] = (x_rb[N * (q >> 1) + ky, N * (q & 1) + kx] * lpf_rb[ky, kx]
+                        + x[N * (q >> 1) + ky, N * (q & 1) + kx])
+            scale = inverse_norm(s[0], s[1], s[2], s[3], fat_zero) * lpf_corr[ky, kx]
+            for q in ti.static(range(4)):
+                x[N * (q >> 1) + ky, N * (q & 1) + kx] = s[q] * scale
+    return x
+
+
+@ti.func
+def spectrum_to_lags(x: ti.template(), unfold_index: ti.template(), unfold_sign: ti.template(), corr: ti.template(),
+                     out: ti.i32):
+    """corr[out] (15, 15) = sum_q U_{q>>1} D_{q>>1} X_q D_{q&1}^T U_{q&1}^T: the 8-point DCT-II-e / DST-II-e D
+    (x 1/2) on both sides, each on folded inputs, then the unfold U as a signed gather (unfold_index /
+    unfold_sign (2, 15), ``operators.unfold_gather``, for the rows; their constants for the columns)."""
+    p = ti.Matrix.zero(ti.f32, 2 * N, 2 * N)  # P_q = X_q D_{q&1}^T (column side): p[row, 8 (q & 1) + m]
+    for row in range(2 * N):
+        acc = ti.Vector.zero(ti.f32, 2 * N)  # in registers: one store per element of p
+        for hs in ti.static(range(2)):
+            for k in ti.static(range(HALF)):
+                even = x[row, N * hs + k] + x[row, N * hs + N - 1 - k]
+                odd = x[row, N * hs + k] - x[row, N * hs + N - 1 - k]
+                for m in ti.static(range(0, N, 2)):
+                    acc[N * hs + m] += ti.static(HALF_DTT2E[hs][m][k]) * even
+                    acc[N * hs + m + 1] += ti.static(HALF_DTT2E[hs][m + 1][k]) * odd
+        for j in ti.static(range(2 * N)):
+            p[row, j] = acc[j]
+    y = ti.Matrix.zero(ti.f32, 2 * N, 2 * N)  # Y_q = D_{q>>1} P_q (row side): y[8 (q >> 1) + m, col]
+    for col in range(2 * N):
+        acc = ti.Vector.zero(ti.f32, 2 * N)
+        for vs in ti.static(range(2)):
+            for k in ti.static(range(HALF)):
+                even = p[N * vs + k, col] + p[N * vs + N - 1 - k, col]
+                odd = p[N * vs + k, col] - p[N * vs + N - 1 - k, col]
+                for m in ti.static(range(0, N, 2)):
+                    acc[N * vs + m] += ti.static(HALF_DTT2E[vs][m][k]) * even
+                    acc[N * vs + m + 1] += ti.static(HALF_DTT2E[vs][m + 1][k]) * odd
+        for j in ti.static(range(2 * N)):
+            y[j, col] = acc[j]
+    # The column unfold first (per row of Y: cosine part + signed sine part, 15 columns), then the rows gather.
+    a = ti.Matrix.zero(ti.f32, 2 * N, CORR_SIDE)
+    for row in range(2 * N):
+        for c in ti.static(range(CORR_SIDE)):
+            a[row, c] = y[row, ti.static(lag_col(0, c))]
+            if ti.static(lag_sign(1, 0, c) != 0.0):  # the sine part is 0 at lag 0
+                a[row, c] += ti.static(lag_sign(1, 0, c)) * y[row, ti.static(lag_col(1, c))]
+    for r in range(CORR_SIDE):
+        row_c = unfold_index[0, r]
+        row_s = N + unfold_index[1, r]
+        sign_r = unfold_sign[1, r]  # the cosine parts' signs are +1
+        for c in ti.static(range(CORR_SIDE)):
+            corr[out, r, c] = a[row_c, c] + sign_r * a[row_s, c]
+
+
+@ti.func
+def correlate_pair(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.template(), positions: ti.template(),
+                   weights: ti.template(), colours: ti.i32, fat_zero: ti.f32, lpf_rb: ti.template(),
+                   lpf_corr: ti.template(), unfold_index: ti.template(), unfold_sign: ti.template(),
+                   corr: ti.template(), out: ti.i32):
+    """corr[out] (15, 15): the phase correlation of one pair (see ``pair_spectrum``)."""
+    x = pair_spectrum(src, base_a, base_b, used, positions, weights, colours, fat_zero, lpf_rb, lpf_corr)
+    spectrum_to_lags(x, unfold_index, unfold_sign, corr, out)
+
+
+@ti.func
+def zero_correlations(corr: ti.template(), first: ti.i32, count: ti.i32):
+    for i in range(first, first + count):
+        for r in range(CORR_SIDE):
+            for c in range(CORR_SIDE):
+                corr[i, r, c] = 0.0
+
+
 @ti.kernel
 def correlate_tiles(
     clt: F32_3D,
@@ -35,101 +164,28 @@ def correlate_tiles(
     pairs: I32_2D,
     cams: ti.i32,
     colours: ti.i32,
-    colour_weights: F32_1D,
+    used: I32_1D,
+    weights: F32_1D,
     fat_zero: ti.f32,
     lpf_rb: F32_2D,
     lpf_corr: F32_2D,
-    dtt2e: F32_3D,
     unfold_index: I32_2D,
     unfold_sign: F32_2D,
     corr: F32_3D,
 ):
-    """One thread per (tile, pair); arguments as kernels/correlate.correlate_tiles except the inverse transform:
-    dtt2e (2, 8, 8) = 1/2 x [DCT-II-e, DST-II-e] [m, k] and unfold_index / unfold_sign (2, 15) [cos/sin, lag + 7]:
-    the one index each lag reads and its sign (0: lag 0 of the sine part), both from tables (the Warp kernel's
-    lags_* = 1/2 x unfold x DCT-II-e as dense products). corr out: (tiles * P, 15, 15), zero for tiles whose CLT
-    is not finite."""
+    """One thread per (tile, pair); arguments as kernels/correlate.correlate_tiles except the colours: used
+    (U,) the colours of non-zero weight, weights (U,) theirs; the inverse transform: the 8-point matrices as
+    compile-time constants and unfold_index / unfold_sign (2, 15) (``operators.unfold_gather``). corr out: (tiles * P, 15, 15), zero for tiles whose CLT is not finite."""
     npairs = pairs.shape[0]
     for tile, p in ti.ndrange(finite.shape[0], npairs):
         out = tile * npairs + p
         if finite[tile] == 0:
-            for r, c in ti.ndrange(CORR_SIDE, CORR_SIDE):
-                corr[out, r, c] = 0.0
+            zero_correlations(corr, out, 1)
         else:
-            x0 = ti.Matrix.zero(ti.f32, N, N)  # CC
-            x1 = ti.Matrix.zero(ti.f32, N, N)  # SC
-            x2 = ti.Matrix.zero(ti.f32, N, N)  # CS
-            x3 = ti.Matrix.zero(ti.f32, N, N)  # SS
-            for ky in range(N):
-                for kx in ti.static(range(N)):
-                    s0 = 0.0
-                    s1 = 0.0
-                    s2 = 0.0
-                    s3 = 0.0
-                    for colour in range(colours):
-                        ia = ((tile * cams + pairs[p, 0]) * colours + colour) * 4
-                        ib = ((tile * cams + pairs[p, 1]) * colours + colour) * 4
-                        a0 = clt[ia + 0, ky, kx]
-                        a1 = clt[ia + 1, ky, kx]
-                        a2 = clt[ia + 2, ky, kx]
-                        a3 = clt[ia + 3, ky, kx]
-                        b0 = clt[ib + 0, ky, kx]
-                        b1 = clt[ib + 1, ky, kx]
-                        b2 = clt[ib + 2, ky, kx]
-                        b3 = clt[ib + 3, ky, kx]
-                        w = colour_weights[colour]  # conj(A) * B per frequency (§6.2)
-                        s0 = w * (a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3) + s0
-                        s1 = w * (a0 * b1 - a1 * b0 + a2 * b3 - a3 * b2) + s1
-                        s2 = w * (a0 * b2 - a2 * b0 + a1 * b3 - a3 * b1) + s2
-                        s3 = w * (a0 * b3 + a3 * b0 - a1 * b2 - a2 * b1) + s3
-                        if colours == 3 and colour == 1:  # R and B accumulated: their low-pass (§6.2)
-                            rb = lpf_rb[ky, kx]
-                            s0 *= rb
-                            s1 *= rb
-                            s2 *= rb
-                            s3 *= rb
-                    scale = inverse_norm(s0, s1, s2, s3, fat_zero) * lpf_corr[ky, kx]
-                    x0[ky, kx] = s0 * scale
-                    x1[ky, kx] = s1 * scale
-                    x2[ky, kx] = s2 * scale
-                    x3[ky, kx] = s3 * scale
-            # Back to lags: R = sum_q U_{q>>1} D_{q>>1} X_q D_{q&1}^T U_{q&1}^T with the 8-point DCT-II-e / DST-II-e
-            # D (x 1/2) and the lag unfold U, one signed index per lag: Y_q = D X_q D^T, then R gathers from Y.
-            p0 = ti.Matrix.zero(ti.f32, N, N)  # P_q = X_q D_{q&1}^T (column side)
-            p1 = ti.Matrix.zero(ti.f32, N, N)
-            p2 = ti.Matrix.zero(ti.f32, N, N)
-            p3 = ti.Matrix.zero(ti.f32, N, N)
-            for m in range(N):
-                for ky in ti.static(range(N)):
-                    for kx in ti.static(range(N)):
-                        dc = dtt2e[0, m, kx]
-                        ds = dtt2e[1, m, kx]
-                        p0[ky, m] += x0[ky, kx] * dc
-                        p1[ky, m] += x1[ky, kx] * ds
-                        p2[ky, m] += x2[ky, kx] * dc
-                        p3[ky, m] += x3[ky, kx] * ds
-            y0 = ti.Matrix.zero(ti.f32, N, N)  # Y_q = D_{q>>1} P_q (row side)
-            y1 = ti.Matrix.zero(ti.f32, N, N)
-            y2 = ti.Matrix.zero(ti.f32, N, N)
-            y3 = ti.Matrix.zero(ti.f32, N, N)
-            for m in range(N):
-                for ky in ti.static(range(N)):
-                    dc = dtt2e[0, m, ky]
-                    ds = dtt2e[1, m, ky]
-                    for c in ti.static(range(N)):
-                        y0[m, c] += dc * p0[ky, c]
-                        y1[m, c] += dc * p1[ky, c]
-                        y2[m, c] += ds * p2[ky, c]
-                        y3[m, c] += ds * p3[ky, c]
-            for r in range(CORR_SIDE):
-                rc = unfold_index[0, r]
-                rs = unfold_index[1, r]
-                sr = unfold_sign[1, r]
-                for c in range(CORR_SIDE):
-                    cc = unfold_index[0, c]
-                    cs = unfold_index[1, c]
-                    sc = unfold_sign[1, c]
-                    corr[out, r, c] = y0[rc, cc] + sc * y1[rc, cs] + sr * y2[rs, cc] + sr * sc * y3[rs, cs]
+            base_a = (tile * cams + pairs[p, 0]) * colours * 4
+            base_b = (tile * cams + pairs[p, 1]) * colours * 4
+            correlate_pair(clt, base_a, base_b, used, used, weights, colours, fat_zero, lpf_rb, lpf_corr, unfold_index,
+                           unfold_sign, corr, out)
 
 
 @ti.func
@@ -143,19 +199,35 @@ def combine(a: ti.f32, b: ti.f32, offset: ti.f32) -> ti.f32:
     return out
 
 
+@ti.func
+def layer_value(corr: ti.template(), tile: ti.i32, layer: ti.i32, row: ti.i32, col: ti.i32, offset: ti.f32):
+    """Element (row, col) of network layer ``layer`` of ``tile``: the 9x9 centre crop of [combine(pair 0,
+    pair 1), combine(pair 2, pair 3), pair 4, pair 5] of the quad's pairs in the spec's order."""
+    y = row + NET_CROP
+    x = col + NET_CROP
+    base = tile * 6
+    value = 0.0
+    if layer == 0:
+        value = combine(corr[base + 0, y, x], corr[base + 1, y, x], offset)
+    elif layer == 1:
+        value = combine(corr[base + 2, y, x], corr[base + 3, y, x], offset)
+    else:
+        value = corr[base + layer + 2, y, x]
+    return value
+
+
+@ti.func
+def tile_layers(corr: ti.template(), tile: ti.i32, offset: ti.f32, layers: ti.template()):
+    """layers[tile] (4, 9, 9) from the tile's 6 correlations."""
+    for layer in range(NET_LAYERS):
+        for row in range(NET_SIDE):
+            for col in range(NET_SIDE):
+                layers[tile, layer, row, col] = layer_value(corr, tile, layer, row, col, offset)
+
+
 @ti.kernel
 def network_layers(corr: F32_3D, offset: ti.f32, layers: F32_4D):
     """corr: (tiles * 6, 15, 15) quad pairs in the spec's order; layers out: (tiles, 4, 9, 9) centre crops of
     [combine(pair 0, pair 1), combine(pair 2, pair 3), pair 4, pair 5]."""
     for tile, layer, row, col in layers:
-        y = row + NET_CROP
-        x = col + NET_CROP
-        base = tile * 6
-        value = 0.0
-        if layer == 0:
-            value = combine(corr[base + 0, y, x], corr[base + 1, y, x], offset)
-        elif layer == 1:
-            value = combine(corr[base + 2, y, x], corr[base + 3, y, x], offset)
-        else:
-            value = corr[base + layer + 2, y, x]
-        layers[tile, layer, row, col] = value
+        layers[tile, layer, row, col] = layer_value(corr, tile, layer, row, col, offset)

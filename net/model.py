@@ -213,6 +213,11 @@ def clusters_residual(x: Tensor, stage1: Sequence[Layer], stage2: Sequence[Layer
     return stage2_output(z, stage2).transpose(0, 1)  # (B, 3)
 
 
+def _version(t: Tensor) -> int:
+    """``t``'s in-place version (inference tensors, e.g. weights loaded under ``torch.inference_mode``, keep none)."""
+    return -1 if t.is_inference() else t._version
+
+
 def stage2_conv(first: Layer, clones: Sequence[int]) -> tuple[Tensor, Tensor]:
     """Stage 2's first layer as 5x5 convolution kernels :math:`(n \\cdot hidden, F, 5, 5)` and biases
     :math:`(n \\cdot hidden)`, one masked copy per clone: ``kernel[o, c, dy+2, dx+2] = W[o, k*F + c]``."""
@@ -366,7 +371,7 @@ class TPNet(nn.Module):
         if not torch.is_grad_enabled():  # inference: stage 2's kernels are made once per set of weights
             clones = tuple(_clone_list(clone)[0])
             weight, bias = stage2[0]
-            key = (clones, weight.data_ptr(), weight._version, bias.data_ptr(), bias._version)
+            key = (clones, weight.data_ptr(), _version(weight), bias.data_ptr(), _version(bias))
             if self._conv_key != key:
                 self._conv, self._conv_key = stage2_conv(stage2[0], clones), key
             conv = self._conv

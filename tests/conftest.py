@@ -1,5 +1,7 @@
 """Shared fixtures: the Warp devices to test on (CPU always; CUDA when present, else skipped with a reason) and the
-kernel backends (Warp and Taichi: every parametrised test runs the same oracle comparison on both)."""
+kernel backends (Warp and Taichi: every parametrised test runs the same oracle comparison on both) and the tile
+passes (split: convert + correlate through the kept CLT tiles; fused: one pass without them), as the
+``TileProcessor`` keyword that selects them."""
 
 import pytest
 
@@ -22,4 +24,10 @@ def device(request):
 
 @pytest.fixture(params=["warp", "taichi"])
 def backend(request):
+    return request.param
+
+
+@pytest.fixture(params=[True, False], ids=["split", "fused"])
+def keep_clt(request):
+    """``clt=`` of ``TileProcessor``: True keeps the CLT tiles (split stages), False runs the fused pass."""
     return request.param

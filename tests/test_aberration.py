@@ -206,11 +206,11 @@ def test_clt_kernels_match_kernel_to_clt_per_kernel():
 def test_identity_kernels_leave_processor_output_unchanged(device, grid):
     # Oracle: the processor without kernels; K_CC = 1 makes the product exact, so results are bit-identical.
     frames = np.random.default_rng(5).uniform(0, 4000, size=(4, H, W)).astype(np.float32)
-    plain = TileProcessor(H, W, device=device).process(frames, 1.5)
+    plain = TileProcessor(H, W, clt=True, device=device).process(frames, 1.5)
     corr, clt = plain.corr.cpu().clone(), plain.clt.cpu().clone()
     kernels = ab.identity_kernels(4, 3, grid=grid)
     assert kernels.shape == ((4, 3, 4, 8, 8) if grid is None else (4, *grid, 3, 4, 8, 8))
-    out = TileProcessor(H, W, kernels=kernels, device=device).process(frames, 1.5)
+    out = TileProcessor(H, W, kernels=kernels, clt=True, device=device).process(frames, 1.5)
     np.testing.assert_array_equal(out.clt.cpu().numpy(), clt.numpy())
     np.testing.assert_array_equal(out.corr.cpu().numpy(), corr.numpy())
 

@@ -25,7 +25,7 @@ def frames():
 
 
 def test_results_share_the_warp_buffers(device, backend, frames):
-    tp = TileProcessor(H, W, device=device, backend=backend)
+    tp = TileProcessor(H, W, clt=True, device=device, backend=backend)
     out = tp.process(frames, 1.0)
     b = tp._buffers
     assert out.corr.data_ptr() == b.corr.ptr and out.clt.data_ptr() == b.clt.ptr
@@ -46,9 +46,9 @@ def test_float32_torch_input_is_read_in_place(device, backend, frames):
     torch.testing.assert_close(staging.cpu(), torch.from_numpy(frames.astype(np.uint16).astype(np.float32)))
 
 
-def test_one_load_serves_many_targets(device, backend, frames):
+def test_one_load_serves_many_targets(device, backend, keep_clt, frames):
     # Oracle: process() of the same frames at each target (load once, measure many = the pipeline's passes).
-    tp = TileProcessor(H, W, device=device, backend=backend)
+    tp = TileProcessor(H, W, clt=keep_clt, device=device, backend=backend)
     want = [tp.process(frames, d).corr.clone() for d in (0.0, 1.5, -2.0)]
     tp.load(frames)
     for d, expected in zip((0.0, 1.5, -2.0), want):
@@ -57,15 +57,15 @@ def test_one_load_serves_many_targets(device, backend, frames):
 
 @pytest.mark.parametrize("dtype", [np.uint16, np.float64, np.int32])
 def test_any_real_dtype_gives_the_same_result(device, backend, frames, dtype):
-    tp = TileProcessor(H, W, device=device, backend=backend)
+    tp = TileProcessor(H, W, clt=True, device=device, backend=backend)
     data = np.round(frames).astype(dtype)
     out = tp.process(data, 0.5)
     want = reference_clt(np.round(frames), out.centres.cpu().numpy(), "GRBG")
     assert relative_error(out.clt, want) <= 1e-5
 
 
-def test_active_mask_skips_tiles(device, backend, frames):
-    tp = TileProcessor(H, W, config=CorrelationConfig(fat_zero=0.0), device=device, backend=backend)
+def test_active_mask_skips_tiles(device, backend, keep_clt, frames):
+    tp = TileProcessor(H, W, config=CorrelationConfig(fat_zero=0.0), clt=keep_clt, device=device, backend=backend)
     active = np.zeros((H // 8, W // 8), dtype=bool)
     active[1:3, 1:4] = True
     out = tp.process(frames, 0.0, active=active)
@@ -200,3 +200,29 @@ def test_a_frame_allocates_nothing(backend, frames):
     with warp_host_allocations() as warp_sizes:
         torch_sizes = torch_allocations(frame)
     assert torch_sizes == [] and warp_sizes == []
+
+
+def test_clt_tiles_are_kept_only_when_asked(backend, frames):
+    # Oracle: the processor's documented contract (tile_processor.py docstring): no CLT buffer for the fused pass.
+    fused = TileProcessor(H, W, device="cpu", backend=backend)
+    assert fused._buffers.clt is None and fused.process(frames, 1.0).clt is None
+    with pytest.raises(RuntimeError, match="clt=True"):
+        fused.convert()
+    assert TileProcessor(H, W, textures=True, device="cpu", backend=backend).result.clt is not None
+
+
+def test_texture_after_a_fused_measure_converts_first(backend, frames):
+    """A texturing processor measures fused (no CLT writes) and converts at the current targets when the
+    texture asks. Oracle: the float64 reference's correlations and the texture ``process`` makes, which the
+    reference tests check against the float64 reference; the texture of the same targets after a fused measure
+    at other targets must be that one (a stale CLT would give the other targets' texture)."""
+    tp = TileProcessor(H, W, textures=True, device="cpu", backend=backend)
+    want = tp.process(frames, 1.5).texture.clone()
+    tp.load(frames)
+    tp.measure(0.0)  # fused, at other targets
+    tp.set_targets(1.5)
+    tp.texture()
+    torch.testing.assert_close(tp.result.texture, want, rtol=0, atol=1e-5)
+    tp.measure(0.0)
+    tp.texture()
+    assert (tp.result.texture - want).abs().max() > 1e-3  # the targets' own texture, not a stale one

@@ -25,3 +25,9 @@ CENTRE_LIMIT = 1.0e6
 # keeps Warp from compiling a module twice). On the CPU a block is one lane (platform.md §1).
 CUDA_BLOCK_DIM = 64
 CPU_BLOCK_DIM = 1
+# Workers of the fused tile pass, each with its own scratch of one tile's spectra (cams x used colours x 4 x 8 x 8):
+# on CUDA one block / thread each (tiles beyond are taken in turn; 8192 x 4 cams x 3 colours: ~100 MB); on the
+# CPU many per Taichi thread: Taichi hands a CPU thread whole chunks of a loop's iterations (16 slots ran on one
+# thread, measured), and 512 per thread keep both threads busy (quad, 3 colours: 12 MB for 2 threads).
+CUDA_FUSED_SLOTS = 8192
+CPU_FUSED_SLOTS_PER_THREAD = 512

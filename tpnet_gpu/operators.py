@@ -86,3 +86,16 @@ def window_squared() -> np.ndarray:
     """w(r)^2 w(c)^2, ``(16, 16)``: what one tile's inverse MCLT carries before overlap-add (§7.3)."""
     w2 = tables.half_sine(np.arange(TILE_SIZE)) ** 2
     return np.outer(w2, w2)
+
+
+def shifted_basis_parts() -> tuple[np.ndarray, np.ndarray]:
+    """The shift-free parts of the forward basis of §3.1 / §13, for its evaluation by angle addition.
+
+    The basis is ``1/2 w(n + s) cos|sin(omega_k (n + s + 4.5))`` with ``w(n + s) = sin(b_n + theta)``,
+    ``b_n = pi (2n + 1) / 32`` and ``omega_k (n + s + 4.5) = phi_kn + (2k + 1) theta``, ``theta = pi s / 16``.
+    Returns ``window (2, 16)`` [sin b_n, cos b_n] and ``phase (2, 8, 16)`` [cos phi_kn, sin phi_kn] (k, n), so a
+    kernel needs one sine and cosine of theta per axis instead of 2 x 16 x 8.
+    """
+    b = np.pi * (2 * np.arange(TILE_SIZE) + 1) / 32.0
+    phi = np.outer(tables.omega(), np.arange(TILE_SIZE) + 4.5)  # (8, 16)
+    return np.stack([np.sin(b), np.cos(b)]), np.stack([np.cos(phi), np.sin(phi)])

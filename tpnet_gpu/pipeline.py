@@ -126,8 +126,7 @@ class Pipeline:
         texture = None
         if cfg.textures:  # shift-corrected at the final disparity
             self.engine.set_targets(tp, torch.where(measured, disparity, result.search))
-            tp.convert()
-            tp.texture()
+            tp.texture()  # converts at these targets (the measuring passes were fused, without CLT tiles)
             texture = tp.result.texture
             texture[:-1] /= self.engine.scale  # colours back in the frames' units (alpha is unitless)
         confidence = torch.where(measured, result.confidence, torch.zeros_like(result.confidence))

@@ -26,7 +26,7 @@ def test_clt_equals_reference_on_random_disparities(device, backend, cfa):
     frames = _frames(rng)
     disparity = rng.uniform(-6, 6, size=(H // 8, W // 8)).astype(np.float32)
     disparity[0, :3] = [40.0, -40.0, 17.3]
-    tp = TileProcessor(H, W, cfa=cfa, device=device, backend=backend)
+    tp = TileProcessor(H, W, cfa=cfa, clt=True, device=device, backend=backend)
     out = tp.process(frames, disparity)
     want = reference_clt(frames, out.centres.cpu().numpy(), cfa)
     assert out.clt.shape == (tp.tiles, 4, 1 if cfa is None else 3, 4, 8, 8)
@@ -37,7 +37,8 @@ def test_clt_equals_reference_at_arbitrary_centres(device, backend):
     # Any centres, including far off the image and exact half-pixel corners (rounded half up).
     rng = np.random.default_rng(11)
     frames = _frames(rng, cams=3)
-    tp = TileProcessor(H, W, camera_offsets=[(0, 0), (1, 0), (0, 1)], pairs=[(0, 1), (0, 2)], device=device, backend=backend)
+    tp = TileProcessor(H, W, camera_offsets=[(0, 0), (1, 0), (0, 1)], pairs=[(0, 1), (0, 2)], clt=True,
+                       device=device, backend=backend)
     centres = rng.uniform(-20, 80, size=(tp.tiles, 3, 2)).astype(np.float32)
     centres[0, 0] = (-1000.0, 5000.0)
     centres[1, 1] = (20.5, 30.5)
@@ -52,15 +53,15 @@ def test_kernel_product_equals_reference(device, backend):
     h = rng.normal(size=(4, 2, 3, 3, 5, 5)) * 0.1  # (cams, rows, cols, colours, 5, 5) pixel-domain kernels
     h[..., 2, 2] += 1.0
     kernels = np.stack([ref.kernel_to_clt(k) for k in h.reshape(-1, 5, 5)]).reshape(4, 2, 3, 3, 4, 8, 8)
-    tp = TileProcessor(H, W, kernels=kernels.astype(np.float32), device=device, backend=backend)
+    tp = TileProcessor(H, W, kernels=kernels.astype(np.float32), clt=True, device=device, backend=backend)
     out = tp.process(frames, 1.5)
     want = reference_clt(frames, out.centres.cpu().numpy(), "GRBG", kernels=kernels)
     assert relative_error(out.clt, want) <= TOL
 
 
-def test_window_validity_mask(device, backend):
+def test_window_validity_mask(device, backend, keep_clt):
     rng = np.random.default_rng(13)
-    tp = TileProcessor(H, W, device=device, backend=backend)
+    tp = TileProcessor(H, W, clt=keep_clt, device=device, backend=backend)
     valid = tp.process(_frames(rng), 0.0).valid.cpu().numpy().reshape(H // 8, W // 8)
     # At disparity 0 every camera reads pixels 8 tx - 4 .. 8 tx + 11: the outer ring of tiles is off the image.
     assert not valid[0].any() and not valid[-1].any() and not valid[:, 0].any() and not valid[:, -1].any()
@@ -71,24 +72,24 @@ def test_window_validity_mask(device, backend):
     assert not valid[2, 3] and valid[2, 4]
 
 
-def test_nan_pixel_masks_only_the_tiles_that_read_it(device, backend):
+def test_nan_pixel_masks_only_the_tiles_that_read_it(device, backend, keep_clt):
     rng = np.random.default_rng(14)
     frames = _frames(rng)
     frames[1, 20, 30] = np.nan  # camera 1, inside the windows of tiles tx 3..4, ty 2..3 at disparity 0
-    tp = TileProcessor(H, W, config=CorrelationConfig(fat_zero=0.0), device=device, backend=backend)
+    tp = TileProcessor(H, W, config=CorrelationConfig(fat_zero=0.0), clt=keep_clt, device=device, backend=backend)
     out = tp.process(frames, 0.0)
     valid = out.valid.cpu().numpy().reshape(H // 8, W // 8)
     assert not valid[2:4, 3:5].any() and valid[1, 1] and valid[4, 6]
     corr = out.corr.cpu().numpy().reshape(H // 8, W // 8, 6, 15, 15)
     assert np.all(corr[2:4, 3:5] == 0) and np.isfinite(corr).all() and np.abs(corr[1, 1]).max() > 0
-    assert np.isfinite(out.clt.cpu().numpy()).all()
+    assert out.clt is None if not keep_clt else np.isfinite(out.clt.cpu().numpy()).all()
 
 
-def test_nan_disparity_masks_the_tile(device, backend):
+def test_nan_disparity_masks_the_tile(device, backend, keep_clt):
     rng = np.random.default_rng(15)
     disparity = np.zeros((H // 8, W // 8), dtype=np.float32)
     disparity[2, 2] = np.nan
-    tp = TileProcessor(H, W, device=device, backend=backend)
+    tp = TileProcessor(H, W, clt=keep_clt, device=device, backend=backend)
     out = tp.process(_frames(rng), disparity)
     valid = out.valid.cpu().numpy().reshape(H // 8, W // 8)
     assert not valid[2, 2] and valid[2, 3]

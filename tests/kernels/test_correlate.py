@@ -23,14 +23,16 @@ TOL = 1e-5
     [
         ("GRBG", CorrelationConfig()),  # spec defaults: fat zero 30, weights (0.25, 0.25, 0.5)
         ("GRBG", CorrelationConfig(fat_zero=0.0, colour_weights=(0.5, 0.2, 0.3), sigma_rb=0.7, sigma_corr=1.2)),
+        ("GRBG", CorrelationConfig(colour_weights=(0.0, 0.0, 1.0), fat_zero=1.0e4)),  # BASELINE: green only
+        ("GRBG", CorrelationConfig(colour_weights=(0.7, 0.0, 0.3))),  # R and G: the R+B low-pass without B
         (None, CorrelationConfig(fat_zero=5.0)),
     ],
 )
-def test_corr_and_layers_equal_reference(device, backend, cfa, config):
+def test_corr_and_layers_equal_reference(device, backend, keep_clt, cfa, config):
     rng = np.random.default_rng(20)
     frames = rng.uniform(0, 1000, size=(4, H, W)).astype(np.float32)
     disparity = rng.uniform(-4, 4, size=(H // 8, W // 8)).astype(np.float32)
-    tp = TileProcessor(H, W, cfa=cfa, config=config, device=device, backend=backend)
+    tp = TileProcessor(H, W, cfa=cfa, config=config, clt=keep_clt, device=device, backend=backend)
     out = tp.process(frames, disparity)
     clt = reference_clt(frames, out.centres.cpu().numpy(), cfa)
     c = tp.config
@@ -42,10 +44,11 @@ def test_corr_and_layers_equal_reference(device, backend, cfa, config):
     assert relative_error(out.layers, ref.network_layers(want, offset=c.net_offset)) <= TOL
 
 
-def test_custom_pairs_and_cameras(device, backend):
+def test_custom_pairs_and_cameras(device, backend, keep_clt):
     rng = np.random.default_rng(21)
     frames = rng.uniform(0, 1000, size=(2, H, W)).astype(np.float32)
-    tp = TileProcessor(H, W, camera_offsets=[(-0.5, 0.0), (0.5, 0.0)], pairs=[(0, 1), (1, 0)], device=device, backend=backend)
+    tp = TileProcessor(H, W, camera_offsets=[(-0.5, 0.0), (0.5, 0.0)], pairs=[(0, 1), (1, 0)], clt=keep_clt,
+                       device=device, backend=backend)
     out = tp.process(frames, 2.0)
     want = reference_corr(reference_clt(frames, out.centres.cpu().numpy(), "GRBG"), [(0, 1), (1, 0)], fat_zero=30.0)
     assert relative_error(out.corr, want) <= TOL
@@ -65,7 +68,7 @@ def test_network_layers_hand_case():
     assert ref.network_layers(corr, offset=-1.0)[0, 1, 4, 4] == pytest.approx(0.15)
 
 
-def test_measures_a_plane_at_known_disparity(device, backend):
+def test_measures_a_plane_at_known_disparity(device, backend, keep_clt):
     """Physical oracle: four views of a band-limited Bayer texture moved by -d r_i (geometry_and_lma.md A.2).
     Correlating at a wrong target T, every pair's peak sits at -(d - T) x pair axis (geometry_and_lma.md B.2);
     refining with the 5x5 centroid converges to d within 0.05 px (median over the interior tiles)."""
@@ -74,7 +77,8 @@ def test_measures_a_plane_at_known_disparity(device, backend):
     colour = smooth_noise(rng, (size, size), 1.5) + 0.3 * smooth_noise(rng, (size, size), 1.5, channels=3)
     offsets = np.array(tables.QUAD_OFFSETS)
     frames = np.stack([mosaic(fourier_shift(colour, *(-d_true * r))) * 100 + 500 for r in offsets])
-    tp = TileProcessor(size, size, config=CorrelationConfig(fat_zero=0.0), device=device, backend=backend)
+    tp = TileProcessor(size, size, config=CorrelationConfig(fat_zero=0.0), clt=keep_clt, device=device,
+                       backend=backend)
     axes = np.array([offsets[b] - offsets[a] for a, b in tables.QUAD_PAIRS])
     target = np.zeros((size // 8, size // 8), dtype=np.float32)
     interior = (slice(1, -1), slice(1, -1))

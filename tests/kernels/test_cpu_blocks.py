@@ -1,8 +1,9 @@
 """The Warp tile kernels at CUDA's block size, on the CPU: Warp runs a tiled launch with 64 logical lanes per
 block as cooperative fibers (``wp.config.enable_cpu_blocks``), so what differs between a 1-lane and a 64-lane
 block (scalar code run by every lane, tile ops spread over lanes, barriers, early returns) is exercised without a
-GPU. Oracle: the same processor at 1 lane per block; tolerance: bitwise equal. In a subprocess, because the
-setting is global to a process."""
+GPU. Both tile passes: split (textures=True: convert, correlate, texture) and fused (one pass, no CLT tiles).
+Oracle: the same processor at 1 lane per block; tolerance: bitwise equal. In a subprocess, because the setting
+is global to a process."""
 
 import subprocess
 import sys
@@ -29,17 +30,20 @@ SCRIPT = textwrap.dedent("""
     kernels = rng.normal(size=(4, 2, 3, 3, 4, 8, 8)).astype(np.float32) * 0.1
     kernels[..., 0, :, :] += 1.0
     bad = 0
-    for label, kw in (("GRBG", {}), ("mono", {"cfa": None}), ("kernel grid", {"kernels": kernels})):
+    kinds = (("GRBG", {}), ("mono", {"cfa": None}), ("kernel grid", {"kernels": kernels}))
+    cases = [(label, kw, split) for label, kw in kinds for split in (True, False)]
+    for label, kw, split in cases:
         out = {}
+        names = ("clt", "corr", "layers", "valid", "texture") if split else ("corr", "layers", "valid")
         for block_dim in (1, CUDA_BLOCK_DIM):
-            tp = TileProcessor(H, W, textures=True, device="cpu", backend="warp", graph=False, **kw)
+            tp = TileProcessor(H, W, textures=split, device="cpu", backend="warp", graph=False, **kw)
             tp._backend.block_dim = block_dim
             r = tp.process(frames, disparity, active=active)
-            out[block_dim] = {k: getattr(r, k).clone() for k in ("clt", "corr", "layers", "valid", "texture")}
+            out[block_dim] = {k: getattr(r, k).clone() for k in names}
         diff = {k: float((out[CUDA_BLOCK_DIM][k].float() - out[1][k].float()).abs().nan_to_num(1e30).max())
                 for k in out[1]}
         bad += any(diff.values())
-        print(label, diff)
+        print(label, "split" if split else "fused", diff)
     sys.exit(1 if bad else 0)
 """)
 

@@ -79,7 +79,7 @@ def _rewrite(module, tmp_path, source: str):
 @pytest.mark.usefixtures("nvrtc")
 def test_every_kernel_module_compiles_for_sm90(tmp_path, monkeypatch):
     modules = cuda_aot.kernel_modules()
-    assert {f"tpnet_gpu.kernels.{m}" for m in ("frames", "convert", "correlate", "texture")} <= set(modules)
+    assert {f"tpnet_gpu.kernels.{m}" for m in ("frames", "convert", "correlate", "fused", "texture")} <= set(modules)
     assert not any(".taichi_" in m for m in modules)
     rows = cuda_aot.check([90])
     assert [r["module"] for r in rows] == modules

@@ -114,6 +114,25 @@ def test_frame_form_equals_cluster_form(torch_device):
         assert want.std() > 0.01  # not a degenerate (constant) output
 
 
+def test_frame_form_with_inference_weights_and_new_weights():
+    """Stage 2's kernels are made once per set of weights: weights made under ``torch.inference_mode`` (they keep
+    no version counter) work, and weights changed in place are picked up. Oracle: forward_clusters; atol 1e-5."""
+    torch.manual_seed(2)
+    layers, target = _frame(device=torch.device("cpu"))
+    clusters = _clusters_by_loops(tile_inputs(layers, target))
+    with torch.inference_mode():
+        net = TPNet()
+        net.load_state_dict({k: v.clone() for k, v in TPNet().state_dict().items()})
+        want = net.forward_clusters(clusters).view(TY, TX, 3)
+        torch.testing.assert_close(net.forward_frame(layers, target), want[..., 0], atol=ATOL, rtol=0)
+    net = TPNet()
+    with torch.no_grad():
+        net.forward_frame(layers, target)
+        net.stage2[0].weight.mul_(1.5)  # in place: same storage, a new version
+        want = net.forward_clusters(clusters).view(TY, TX, 3)
+        torch.testing.assert_close(net.forward_frame(layers, target), want[..., 0], atol=ATOL, rtol=0)
+
+
 def test_clones_mask_neighbours():
     # Oracle: clone n ignores tiles outside its square -> changing a ring-2 tile moves only clone 0,
     # changing a ring-1 tile moves clones 0 and 1.

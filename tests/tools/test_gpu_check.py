@@ -54,7 +54,7 @@ def test_dry_run_with_a_sanitizer(tmp_path):
     assert done.returncode == 0, done.stderr[-2000:]
     steps = report["steps"]
     assert list(steps) == ["env", "compile", "tp", "memcheck"] and all(s["ok"] is True for s in steps.values())
-    assert len(steps["compile"]["compile_s"]) == 4  # frames, convert, correlate, texture
+    assert len(steps["compile"]["compile_s"]) == 5  # frames, convert, correlate, fused, texture
     assert set(steps["tp"]["runs"]) == {"64x48_graph_off", "64x48_graph_on"}
     assert all(r["process_ms"]["median"] > 0 and len(r["measure_ms"]["runs"]) == 2 for r in steps["tp"]["runs"].values())
     assert steps["memcheck"]["summary"] == ["========= ERROR SUMMARY: 0 errors"]

@@ -14,8 +14,9 @@ import torch
 
 # pad: frames -> padded frames; centres: target disparities -> ideal-rig tile centres; convert: padded frames and
 # centres -> CLT tiles, finite and valid masks; correlate: CLT -> pair correlations (+ network layers);
-# texture: CLT -> RGBA canvas.
-STEPS = ("pad", "centres", "convert", "correlate", "texture")
+# texture: CLT -> RGBA canvas; fused: padded frames and centres -> pair correlations (+ layers), finite and valid
+# masks in one pass without the CLT buffer.
+STEPS = ("pad", "centres", "convert", "correlate", "texture", "fused")
 
 
 class Backend(Protocol):
@@ -30,5 +31,5 @@ class Backend(Protocol):
             steps: the steps to run.
             frames: for ``pad``: ``(cams, H, W)`` float32 contiguous frames on the device to read in place, or
                 None for the processor's staging buffer.
-            masked: for ``convert``: read the ``active`` mask buffer (else every tile is active).
+            masked: for ``convert`` and ``fused``: read the ``active`` mask buffer (else every tile is active).
         """

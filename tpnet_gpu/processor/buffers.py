@@ -26,7 +26,8 @@ class TileResult:
 
     Attributes:
         clt: ``(tiles, cams, colours, 4, 8, 8)`` frequency-domain tiles (CC, SC, CS, SS; colours R, B, G).
-            Stale for inactive tiles, zero-filled windows where pixels were not finite.
+            Stale for inactive tiles, zero-filled windows where pixels were not finite. None unless the
+            processor keeps them (built with ``clt=True`` or ``textures=True``).
         corr: ``(tiles, pairs, 15, 15)`` pair correlations, row = vertical lag + 7; zero where not computed.
         layers: ``(tiles, 4, 9, 9)`` network layers [hor, vert, diag-main, diag-other], or None unless the
             pairs are the quad's 6.
@@ -40,7 +41,7 @@ class TileResult:
             tile contributed (an empty texture is all zero).
     """
 
-    clt: torch.Tensor
+    clt: torch.Tensor | None
     corr: torch.Tensor
     layers: torch.Tensor | None
     valid: torch.Tensor
@@ -52,6 +53,11 @@ class TileResult:
 # cmp) - 1.9 GB for a 5 MPix quad frame at once, 0.18 GB per band of 16 rows; the combine step also runs on the
 # band's 2 halo rows (it reads the neighbours' ``finite`` for the alpha fade): +2/16 of that step.
 TEXTURE_BAND_ROWS = 16
+
+
+def texture_band_tiles(tiles_y: int, tiles_x: int) -> int:
+    """Tiles the texture scratch holds: one band with its halo rows."""
+    return (min(TEXTURE_BAND_ROWS, tiles_y) + 2) * tiles_x
 
 
 @dataclass(frozen=True)
@@ -84,17 +90,19 @@ class Buffers:
 
     Per-frame arrays (shapes): ``frames`` (cams, H, W) input staging; ``padded`` (cams, H + 2 PAD, W + 2 PAD);
     ``disparity`` (tiles_y, tiles_x); ``centres`` (tiles, cams, 2); ``active``, ``all_active``, ``finite``,
-    ``valid`` (tiles,) bool; ``clt`` (tiles * cams * colours * 4, 8, 8); ``corr`` (tiles * pairs, 15, 15);
-    ``layers`` (tiles, 4, 9, 9) or None. Texture (``textures=True``): ``tex_rgba`` (tiles * (colours + 1),
-    16, 16) per-tile contributions, ``canvas`` (colours + 1, H + 8, W + 8), and the scratch of one band of
-    ``TEXTURE_BAND_ROWS`` tile rows with a halo row above and below (span = (rows + 2) * tiles_x tiles):
-    ``tex_pix``, ``tex_cmp`` (span * cams * colours, 16, 16), ``tex_weights`` (span * cams, 16, 16),
-    ``tex_part`` (span * (colours + 1), 16, 16); ``texture_bands`` the views of each band (``TextureBand``).
+    ``valid`` (tiles,) bool; ``clt`` (tiles * cams * colours * 4, 8, 8) or None (``keep_clt`` False); ``corr``
+    (tiles * pairs, 15, 15); ``layers`` (tiles, 4, 9, 9) or None; the fused pass's ``tasks`` (tiles,) int32,
+    ``count`` (1,) int32 and ``scratch`` (slots * cams * U * 4, 8, 8) (``allocate_fused``; U: the used colours).
+    Texture (``textures=True``): ``tex_rgba`` (tiles * (colours + 1), 16, 16) per-tile contributions, ``canvas``
+    (colours + 1, H + 8, W + 8), and the scratch of one band of ``TEXTURE_BAND_ROWS`` tile rows with a halo row
+    above and below (span = (rows + 2) * tiles_x tiles): ``tex_pix``, ``tex_cmp`` (span * cams * colours, 16,
+    16), ``tex_weights`` (span * cams, 16, 16), ``tex_part`` (span * (colours + 1), 16, 16); ``texture_bands``
+    the views of each band (``TextureBand``).
     """
 
     def __init__(self, geo: Geometry, config: CorrelationConfig, texture_config: TextureConfig | None,
-                 kernels: np.ndarray | None, device: wp.Device):
-        self.device = device
+                 kernels: np.ndarray | None, device: wp.Device, *, keep_clt: bool):
+        self.device, self.geo = device, geo
         self.torch_device = torch.device(wp.device_to_torch(device))
         cams, tiles, colours, npairs = geo.cams, geo.tiles, geo.colours, len(geo.pairs)
         zeros = self._zeros
@@ -104,16 +112,19 @@ class Buffers:
         self.active = wp.ones(tiles, dtype=wp.bool, device=device)
         self.all_active = wp.ones(tiles, dtype=wp.bool, device=device)
         self.centres = zeros((tiles, cams, 2))
-        self.clt = zeros((tiles * cams * colours * 4, DTT_SIZE, DTT_SIZE))
+        self.clt = zeros((tiles * cams * colours * 4, DTT_SIZE, DTT_SIZE)) if keep_clt else None  # ~1 GB at 5 MPix
         self.finite = wp.zeros(tiles, dtype=wp.bool, device=device)
         self.valid = wp.zeros(tiles, dtype=wp.bool, device=device)
         self.corr = zeros((tiles * npairs, CORR_SIDE, CORR_SIDE))
         self.layers = zeros((tiles, NET_LAYERS, NET_SIDE, NET_SIDE)) if geo.pairs == tables.QUAD_PAIRS else None
+        self.tasks = wp.zeros(tiles, dtype=wp.int32, device=device)
+        self.count = wp.zeros(1, dtype=wp.int32, device=device)
+        self.scratch = None
         self._tables(geo, config, kernels)
         texture_view = None if texture_config is None else self._texture(geo, texture_config)
         t = wp.to_torch
         self.result = TileResult(
-            clt=t(self.clt).view(tiles, cams, colours, 4, DTT_SIZE, DTT_SIZE),
+            clt=None if self.clt is None else t(self.clt).view(tiles, cams, colours, 4, DTT_SIZE, DTT_SIZE),
             corr=t(self.corr).view(tiles, npairs, CORR_SIDE, CORR_SIDE),
             layers=None if self.layers is None else t(self.layers),
             valid=t(self.valid),
@@ -121,6 +132,11 @@ class Buffers:
             texture=texture_view,
         )
         self.frames_t, self.disparity_t, self.active_t = t(self.frames), t(self.disparity), t(self.active)
+
+    def allocate_fused(self, slots: int) -> None:
+        """The fused pass's scratch for ``slots`` workers (the backend's choice): ``(slots * cams * U * 4, 8, 8)``."""
+        used = self.used_colours.shape[0]
+        self.scratch = self._zeros((slots * self.geo.cams * used * 4, DTT_SIZE, DTT_SIZE))
 
     # --- helpers ---------------------------------------------------------------------------------------------
     def _zeros(self, shape) -> wp.array:
@@ -141,7 +157,10 @@ class Buffers:
         up = self.upload
         self.offsets = wp.array(geo.offsets, dtype=wp.vec2f, device=self.device)  # (cams,) vec2
         self.pairs = up(np.array(geo.pairs), wp.int32)  # (pairs, 2)
-        self.masks = up(operators.colour_masks(geo.cfa).reshape(-1, TILE_SIZE, TILE_SIZE))  # (4 colours, 16, 16)
+        masks = operators.colour_masks(geo.cfa).reshape(-1, TILE_SIZE, TILE_SIZE)
+        # The Taichi kernels read a row's weights from its first two columns: masks must repeat every 2 columns.
+        assert np.array_equal(masks, np.roll(masks, 2, axis=-1)), "colour masks must be 2-periodic along rows"
+        self.masks = up(masks)  # (4 colours, 16, 16)
         self.use_kernels = kernels is not None
         k = kernels if kernels is not None else np.zeros((1, 1, 1, 1, 4, DTT_SIZE, DTT_SIZE), np.float32)
         self.kernel_grid = (k.shape[1], k.shape[2])  # (rows, cols) of the 16-px kernel grid
@@ -157,14 +176,22 @@ class Buffers:
         lags = operators.lag_operators(CORR_RADIUS)  # (2, 15, 8)
         self.lags_cos, self.lags_sin = up(lags[0]), up(lags[1])
         self.freqs_cos, self.freqs_sin = up(lags[0].T), up(lags[1].T)  # (8, 15)
+        # The colours a correlation reads: those of non-zero weight (all of them when every weight is zero).
+        weights = np.asarray(cfg.colour_weights, dtype=np.float64)
+        used = np.flatnonzero(weights) if weights.any() else np.arange(geo.colours)
+        self.used_colours, self.used_weights = up(used, wp.int32), up(weights[used])  # (U,)
+        self.used_positions = up(np.arange(len(used)), wp.int32)  # (U,): their places in the fused scratch
+        self.all_colours = up(np.arange(geo.colours), wp.int32)  # (colours,): what the split convert writes
+        # Taichi: the forward basis by angle addition (2, 16), (2, 8, 16); the lag unfold as a gather (2, 15).
+        window_parts, phase_parts = operators.shifted_basis_parts()
+        self.basis_window, self.basis_phase = up(window_parts), up(phase_parts)
         index, sign = operators.unfold_gather(CORR_RADIUS)
-        self.dtt2e = up(operators.half_dtt2e())  # (2, 8, 8), Taichi's inverse as 8-point products
-        self.unfold_index, self.unfold_sign = up(index, wp.int32), up(sign)  # (2, 15)
+        self.unfold_index, self.unfold_sign = up(index, wp.int32), up(sign)
 
     def _texture(self, geo: Geometry, tc: TextureConfig) -> torch.Tensor:
         """Texture buffers and tables; returns the image view ``(colours + 1, H, W)`` of the canvas."""
         side = (TILE_SIZE, TILE_SIZE)
-        span = (min(TEXTURE_BAND_ROWS, geo.tiles_y) + 2) * geo.tiles_x
+        span = texture_band_tiles(geo.tiles_y, geo.tiles_x)
         channels = geo.colours + 1
         self.tex_pix = self._zeros((span * geo.cams * geo.colours, *side))
         self.tex_cmp = self._zeros((span * geo.cams * geo.colours, *side))

@@ -15,7 +15,8 @@ import torch
 
 from tpnet_gpu import tables, taichi_setup
 from tpnet_gpu.config import CorrelationConfig, TextureConfig
-from tpnet_gpu.kernels import taichi_convert, taichi_correlate, taichi_frames, taichi_texture
+from tpnet_gpu.kernels import taichi_convert, taichi_correlate, taichi_frames, taichi_fused, taichi_texture
+from tpnet_gpu.layout import CPU_FUSED_SLOTS_PER_THREAD, CUDA_FUSED_SLOTS, NET_LAYERS, NET_SIDE
 from tpnet_gpu.processor.buffers import Buffers
 from tpnet_gpu.processor.validate import Geometry
 
@@ -35,6 +36,11 @@ class TaichiBackend:
         taichi_setup.init_taichi(self.arch)
         self.t = {}  # Warp array id -> its torch view, made once
         self.frames_t = buffers.frames_t
+        # Fused pass: a few slots per CPU thread (balance), one GPU thread per slot on CUDA (at most one per tile).
+        slots = min(geo.tiles, CUDA_FUSED_SLOTS) if self.cuda else CPU_FUSED_SLOTS_PER_THREAD * taichi_setup.threads()
+        buffers.allocate_fused(slots)
+        # The fused kernel's layers argument when there are no layers (not written: with_layers is False).
+        self.no_layers = torch.zeros((1, NET_LAYERS, NET_SIDE, NET_SIDE), device=buffers.torch_device)
 
     def _v(self, array) -> torch.Tensor:
         view = self.t.get(id(array))
@@ -50,8 +56,8 @@ class TaichiBackend:
             for step in steps:
                 if step == "pad":
                     taichi_frames.pad_frames(self.frames_t if frames is None else frames, self._v(self.b.padded))
-                elif step == "convert":
-                    self._convert(masked)
+                elif step in ("convert", "fused"):
+                    getattr(self, "_" + step)(masked)
                 else:
                     getattr(self, "_" + step)()
             if self.cuda:
@@ -64,16 +70,29 @@ class TaichiBackend:
     def _convert(self, masked: bool) -> None:
         b, geo, v = self.b, self.geo, self._v
         taichi_convert.convert_tiles(
-            v(b.padded), v(b.centres), v(b.active if masked else b.all_active), v(b.masks), v(b.kernels),
+            v(b.padded), v(b.centres), v(b.active if masked else b.all_active), v(b.masks), v(b.basis_window),
+            v(b.basis_phase), v(b.kernels),
             b.kernel_grid[0], b.kernel_grid[1], int(b.use_kernels), geo.height, geo.width, geo.colours,
             v(b.clt), v(b.finite), v(b.valid),
+        )
+
+    def _fused(self, masked: bool) -> None:
+        b, geo, cfg, v = self.b, self.geo, self.config, self._v
+        taichi_fused.fused_tiles(
+            v(b.padded), v(b.centres), v(b.active if masked else b.all_active), v(b.masks), v(b.basis_window),
+            v(b.basis_phase), v(b.kernels),
+            b.kernel_grid[0], b.kernel_grid[1], int(b.use_kernels), geo.height, geo.width, geo.colours,
+            v(b.used_colours), v(b.used_positions), v(b.used_weights), v(b.pairs), cfg.fat_zero, v(b.lpf_rb),
+            v(b.lpf_corr), v(b.unfold_index), v(b.unfold_sign), cfg.net_offset, b.layers is not None, v(b.tasks),
+            v(b.count), v(b.scratch), v(b.corr),
+            self.no_layers if b.layers is None else v(b.layers), v(b.finite), v(b.valid),
         )
 
     def _correlate(self) -> None:
         b, geo, cfg, v = self.b, self.geo, self.config, self._v
         taichi_correlate.correlate_tiles(
-            v(b.clt), v(b.finite), v(b.pairs), geo.cams, geo.colours, v(b.colour_weights), cfg.fat_zero,
-            v(b.lpf_rb), v(b.lpf_corr), v(b.dtt2e), v(b.unfold_index), v(b.unfold_sign), v(b.corr),
+            v(b.clt), v(b.finite), v(b.pairs), geo.cams, geo.colours, v(b.used_colours), v(b.used_weights),
+            cfg.fat_zero, v(b.lpf_rb), v(b.lpf_corr), v(b.unfold_index), v(b.unfold_sign), v(b.corr),
         )
         if b.layers is not None:
             taichi_correlate.network_layers(v(b.corr), cfg.net_offset, v(b.layers))

@@ -6,6 +6,14 @@ maps or copies the inputs into those buffers and has the backend launch. A frame
 staging and padding) and can then be measured at any number of targets (``measure``), as the pipeline's passes
 do; ``process`` is load + measure (+ texture) in one call. Results are zero-copy torch views of the buffers on
 the processor's device, overwritten by the next call (clone them to keep a frame's results).
+
+Fused or split: ``measure`` runs the fused pass - one launch that converts and correlates each active tile (a
+task list of them) without writing the frequency-domain (CLT) tiles - unless the processor was built with
+``clt=True``: then it runs the split stages (convert, then correlate) and ``result.clt`` holds the tiles. The CLT
+buffer (~1 GB at 2592x1936 quad) exists only with ``clt=True`` or ``textures=True``; ``texture`` converts the
+tiles first when the last targets have not been converted (after a fused ``measure``), so measuring passes stay
+fused on a texturing processor. Both paths give the same correlations, layers and masks (tests compare each to
+the float64 reference); without the buffer ``result.clt`` is None.
 """
 
 from __future__ import annotations
@@ -33,7 +41,9 @@ class TileProcessor:
         kernels: optional aberration kernels in CLT form, ``(cams, colours, 4, 8, 8)`` (one per camera and
             colour) or ``(cams, rows, cols, colours, 4, 8, 8)`` on the 16-px kernel grid (node n at 16 n - 8).
         config: correlation parameters.
-        textures: also make the RGBA texture image in ``process`` (allocates its buffers).
+        textures: also make the RGBA texture image in ``process`` (allocates its buffers; keeps the CLT tiles).
+        clt: keep the CLT tiles (``result.clt``, the ``convert``/``correlate`` stages); else ``measure`` runs the
+            fused pass (module docstring).
         texture_config: texture parameters.
         graph: record each step sequence's launches once as a Warp graph (a CUDA graph on the GPU) and replay
             it for every later call; inputs are then always staged into the processor's buffers. Default: on
@@ -57,6 +67,7 @@ class TileProcessor:
         kernels=None,
         config: CorrelationConfig = CorrelationConfig(),
         textures: bool = False,
+        clt: bool = False,
         texture_config: TextureConfig = TextureConfig(),
         graph: bool | None = None,
         device: str | None = None,
@@ -73,10 +84,12 @@ class TileProcessor:
         self.geometry = geo
         self.config = config.resolved(geo.colours)
         self.textures = bool(textures)
+        self.keeps_clt = bool(clt)  # measure keeps the CLT tiles (split stages)
+        self._converted = False  # the CLT tiles are those of the current targets
         self.texture_config = texture_config.resolved(geo.colours)
         self.graph = (self.device.is_cuda and backend == "warp") if graph is None else bool(graph)
         self._buffers = Buffers(geo, self.config, self.texture_config if self.textures else None,
-                                validate.kernels(kernels, geo), self.device)
+                                validate.kernels(kernels, geo), self.device, keep_clt=self.keeps_clt or self.textures)
         if backend == "taichi":
             from tpnet_gpu.processor.taichi_backend import TaichiBackend  # noqa: PLC0415 - Taichi only when asked
 
@@ -130,6 +143,7 @@ class TileProcessor:
             b.frames_t.copy_(frames)  # converts dtype and device
         self._backend.run(("pad",), frames=frames if in_place else None, masked=False)
         self._frame_count += 1
+        self._converted = False
 
     def set_targets(self, target_disparity=None, *, centres=None, active=None) -> None:
         """Copy one pass's targets into the processor's buffers (see ``measure`` for the arguments)."""
@@ -150,6 +164,7 @@ class TileProcessor:
             b.active_t.fill_(True)
         self._masked = mask is not None or self.graph
         self._ideal = centres is None
+        self._converted = False
 
     def measure(self, target_disparity=None, *, centres=None, active=None) -> TileResult:
         """Convert and correlate the loaded frames at new targets.
@@ -165,7 +180,12 @@ class TileProcessor:
             TileResult of torch tensors on the processor's device (views, overwritten by the next call).
         """
         self.set_targets(target_disparity, centres=centres, active=active)
-        self._run(("convert", "correlate"))
+        return self.run_measurement()
+
+    def run_measurement(self) -> TileResult:
+        """Convert and correlate the loaded frames at the targets ``set_targets`` put in place: the split stages
+        when the CLT tiles are kept, else the fused pass (module docstring). Returns ``result``."""
+        self._run(self._pass)
         return self.result
 
     def process(self, frames, target_disparity=None, *, centres=None, active=None) -> TileResult:
@@ -173,13 +193,19 @@ class TileProcessor:
         validate.targets(target_disparity, centres)
         self.load(frames)
         self.set_targets(target_disparity, centres=centres, active=active)
-        self._run(("convert", "correlate", "texture") if self.textures else ("convert", "correlate"))
+        self._run(("convert", "correlate", "texture") if self.textures else self._pass)
         return self.result
 
+    @property
+    def _pass(self) -> tuple[str, ...]:
+        """The steps of one measurement: split when the CLT tiles are kept, else fused."""
+        return ("convert", "correlate") if self.keeps_clt else ("fused",)
+
     def _run(self, steps: tuple[str, ...]) -> None:
-        if self._ideal and "convert" in steps:
+        if self._ideal and ("convert" in steps or "fused" in steps):
             steps = ("centres", *steps)
         self._backend.run(steps, frames=None, masked=self._masked)
+        self._converted = self._converted or "convert" in steps
 
     # --- stages (public so benchmarks can time them; ``process`` runs them in order) ----------------------------
     def prepare(self, frames, target_disparity=None, *, centres=None, active=None) -> None:
@@ -192,15 +218,28 @@ class TileProcessor:
         self._ideal = False  # the centres are now in place for convert
 
     def convert(self) -> None:
-        """Stage 1: padded frames and centres -> CLT tiles, finite and valid masks."""
+        """Stage 1: padded frames and centres -> CLT tiles, finite and valid masks (needs the CLT tiles kept)."""
+        self._need_clt("convert")
         self._run(("convert",))
 
     def correlate(self) -> None:
         """Stage 2: CLT tiles -> pair correlations (and the network layers for the quad's pairs)."""
+        self._need_clt("correlate")
         self._run(("correlate",))
 
+    def fused(self) -> None:
+        """Stages 1 + 2 in one pass without the CLT tiles: padded frames and centres -> correlations, layers,
+        finite and valid masks (what ``measure`` runs on a processor that does not keep the CLT tiles)."""
+        self._run(("fused",))
+
+    def _need_clt(self, stage: str) -> None:
+        if self._buffers.clt is None:
+            raise RuntimeError(f"{stage}: this processor does not keep the CLT tiles; build it with clt=True "
+                               "(or textures=True), or run fused()")
+
     def texture(self) -> None:
-        """Stage 3: CLT tiles -> RGBA texture image (needs ``textures=True`` at construction)."""
+        """Stage 3: CLT tiles -> RGBA texture image (needs ``textures=True`` at construction); converts the
+        loaded frames at the current targets first unless that was the last thing done to them."""
         if not self.textures:
             raise RuntimeError("texture: this processor was built without textures=True")
-        self._run(("texture",))
+        self._run(("texture",) if self._converted else ("convert", "texture"))

@@ -5,7 +5,9 @@ stream, so torch's copies and readers are ordered with the kernels. A step seque
 once, on a private Warp stream - capture is illegal on the legacy default stream that torch normally uses - and
 replayed with ``wp.capture_launch(graph, stream=<torch's stream>)``. Every launch on CUDA, tiled or per thread,
 uses ``CUDA_BLOCK_DIM``: Warp compiles a module once per block size, so one size means one build per module.
-On the CPU a block is one lane and a "graph" is Warp's recorded launches.
+On the CPU a block is one lane and a "graph" is Warp's recorded launches. The fused pass runs one block on the
+CPU (a launch is serial there anyway) and ``CUDA_FUSED_SLOTS`` blocks (at most one per tile) on CUDA, each looping
+over its share of the task list.
 """
 
 from __future__ import annotations
@@ -18,14 +20,14 @@ import warp as wp
 
 from tpnet_gpu import tables
 from tpnet_gpu.config import CorrelationConfig, TextureConfig
-from tpnet_gpu.kernels import convert, correlate, frames, texture
-from tpnet_gpu.layout import CPU_BLOCK_DIM, CUDA_BLOCK_DIM
+from tpnet_gpu.kernels import convert, correlate, frames, fused, texture
+from tpnet_gpu.layout import CPU_BLOCK_DIM, CUDA_BLOCK_DIM, CUDA_FUSED_SLOTS
 from tpnet_gpu.processor.buffers import Buffers
 from tpnet_gpu.processor.validate import Geometry
 
 # Warp's CPU tile kernels share one scratch arena: two concurrent launches abort the process (platform.md §1).
 _CPU_LAUNCH_LOCK = threading.Lock()
-KERNEL_MODULES = (frames, convert, correlate, texture)
+KERNEL_MODULES = (frames, convert, correlate, fused, texture)
 
 
 class WarpBackend:
@@ -43,6 +45,8 @@ class WarpBackend:
         self._streams: dict[int, wp.Stream] = {}  # torch stream handle -> its Warp wrapper
         self._capture_stream = wp.Stream(self.device) if graph and self.device.is_cuda else None
         self._lock = _CPU_LAUNCH_LOCK if self.device.is_cpu else threading.Lock()
+        self.slots = min(geo.tiles, CUDA_FUSED_SLOTS) if self.device.is_cuda else 1
+        buffers.allocate_fused(self.slots)
 
     # --- streams and graphs --------------------------------------------------------------------------------
     def _torch_stream(self) -> wp.Stream | None:
@@ -83,8 +87,8 @@ class WarpBackend:
         for step in steps:
             if step == "pad":
                 self._pad(frames_t)
-            elif step == "convert":
-                self._convert(masked)
+            elif step in ("convert", "fused"):
+                getattr(self, "_" + step)(masked)
             else:
                 getattr(self, "_" + step)()
 
@@ -114,7 +118,7 @@ class WarpBackend:
             convert.convert_tiles,
             [b.padded, b.centres, b.active if masked else b.all_active, b.masks, b.k_rows, b.n_rows, b.n_cols,
              b.k_cols, b.kernels, b.kernel_grid[0], b.kernel_grid[1], b.use_kernels, geo.height, geo.width,
-             geo.colours],
+             b.all_colours],
             [b.clt, b.finite, b.valid],
         )
 
@@ -122,12 +126,32 @@ class WarpBackend:
         b, geo, cfg = self.b, self.geo, self.config
         self._tile_launch(
             correlate.correlate_tiles,
-            [b.clt, b.finite, b.pairs, geo.cams, geo.colours, b.colour_weights, cfg.fat_zero, b.lpf_rb, b.lpf_corr,
-             b.lags_cos, b.lags_sin, b.freqs_cos, b.freqs_sin],
+            [b.clt, b.finite, b.pairs, geo.cams, geo.colours, b.used_colours, b.used_weights, cfg.fat_zero,
+             b.lpf_rb, b.lpf_corr, b.lags_cos, b.lags_sin, b.freqs_cos, b.freqs_sin],
             [b.corr],
         )
+        self._layers()
+
+    def _layers(self) -> None:
+        b = self.b
         if b.layers is not None:
-            self._thread_launch(correlate.network_layers, b.layers.shape, [b.corr, cfg.net_offset], [b.layers])
+            self._thread_launch(correlate.network_layers, b.layers.shape, [b.corr, self.config.net_offset],
+                                [b.layers])
+
+    def _fused(self, masked: bool) -> None:
+        b, geo, cfg = self.b, self.geo, self.config
+        self._thread_launch(fused.reset_count, 1, [], [b.count])
+        self._thread_launch(fused.compact_tasks, geo.tiles, [b.active if masked else b.all_active, len(geo.pairs)],
+                            [b.tasks, b.count, b.finite, b.valid, b.corr])
+        wp.launch_tiled(
+            fused.fused_tiles, dim=[self.slots],
+            inputs=[b.tasks, b.count, self.slots, b.padded, b.centres, b.masks, b.k_rows, b.n_rows, b.n_cols,
+                    b.k_cols, b.kernels, b.kernel_grid[0], b.kernel_grid[1], b.use_kernels, geo.height, geo.width,
+                    geo.colours, b.used_colours, b.used_positions, b.used_weights, b.pairs, cfg.fat_zero, b.lpf_rb,
+                    b.lpf_corr, b.lags_cos, b.lags_sin, b.freqs_cos, b.freqs_sin, b.scratch],
+            outputs=[b.corr, b.finite, b.valid], block_dim=self.block_dim, device=self.device,
+        )
+        self._layers()
 
     def _texture(self) -> None:
         b, geo, tc = self.b, self.geo, self.texture_config

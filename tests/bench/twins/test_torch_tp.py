@@ -96,7 +96,7 @@ def test_equals_the_processor_on_its_device(device):
     from tpnet_gpu.processor import TileProcessor
 
     frames, _ = random_case(7)
-    tp = TileProcessor(frames.shape[1], frames.shape[2], device=device)
+    tp = TileProcessor(frames.shape[1], frames.shape[2], clt=True, device=device)
     out = tp.process(frames, 1.5)
     frames_t = torch.from_numpy(frames).to(tp.torch_device)
     clt = torch_tp.torch_convert(frames_t, out.centres, "GRBG")
