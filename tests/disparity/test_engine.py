@@ -53,9 +53,8 @@ def test_engine_finds_the_rendered_disparity(name, max_gross, max_rmse):
 def test_engine_in_chunks_of_tiles(monkeypatch):
     """The passes' correlations read a few tiles at a time (as a 5 MPix frame is): the same ground-truth bounds
     on the quad (chunks of 97 tiles: every pass spans many, the last one partial)."""
-    from tpnet_gpu.disparity import engine, measure  # noqa: PLC0415
+    from tpnet_gpu.disparity import measure  # noqa: PLC0415
 
-    monkeypatch.setattr(engine, "CHUNK", 97)
     monkeypatch.setattr(measure, "CHUNK", 97)
     rendered, result = run(RIGS["quad"])
     stats = flat_stats(rendered, result.disparity)

@@ -20,7 +20,7 @@ import torch
 from tpnet_gpu import tables
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig
-from tpnet_gpu.disparity.measure import CHUNK, Measurer
+from tpnet_gpu.disparity.measure import Measurer, row_chunks
 from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs
 from tpnet_gpu.disparity.volume import CostVolume, aggregate, pick
 from tpnet_gpu.processor import TileProcessor
@@ -143,8 +143,8 @@ class DisparityEngine:
         for target in targets:
             t = target if isinstance(target, torch.Tensor) else self._uniform.fill_(float(target))
             corr = self.measure_at(tp, t, active=active).corr
-            for part in tiles.split(CHUNK):
-                combined = combine_pairs(self.sampler.sample(corr.index_select(0, part), self.offsets))
+            for part, rows in row_chunks(corr, tiles):
+                combined = combine_pairs(self.sampler.sample(rows, self.offsets))
                 volume.add(t.reshape(-1).index_select(0, part), self.offsets, combined, self.config.reach, part)
 
     def _targets(self, tp: TileProcessor, target: torch.Tensor) -> dict:

@@ -24,6 +24,14 @@ PEAK_OFFSETS = 0.25  # px between the offsets the generic peak is read at
 CHUNK = 8192
 
 
+def row_chunks(x: torch.Tensor, index: torch.Tensor):
+    """``(part, rows)`` for each CHUNK of ``index`` ``(N,)``: the rows of ``x`` it names - views when ``index``
+    is every row in order (a full pass: no copy of its correlations), copies otherwise."""
+    everything = index.numel() == x.shape[0]  # nonzero / arange give every row in order then
+    for start, part in zip(range(0, index.numel(), CHUNK), index.split(CHUNK)):
+        yield part, x.narrow(0, start, part.numel()) if everything else x.index_select(0, part)
+
+
 WIDEN_SIGMA = 0.9  # px: Gaussian blur of mono correlations before the peak is located
 
 
@@ -61,8 +69,7 @@ class Measurer:
         tiles = corr.shape[0]
         residual = torch.full((tiles,), float("nan"), device=corr.device)
         strength = torch.zeros((tiles,), device=corr.device)
-        for index in torch.nonzero(active, as_tuple=True)[0].split(CHUNK):  # bounded temporaries
-            sub = corr.index_select(0, index)
+        for index, sub in row_chunks(corr, torch.nonzero(active, as_tuple=True)[0]):  # bounded temporaries
             if self.lma:  # the LMA runs in float64 NumPy (a host round trip of the active tiles)
                 m = lma_measure(sub.detach().cpu().numpy(), self.params)
                 d = torch.as_tensor(m.residual, dtype=torch.float32, device=corr.device)
