@@ -181,6 +181,7 @@ class Buffers:
         self.inv_cos, self.inv_sin = up(inverse[0]), up(inverse[1])
         self.inv_cos_t, self.inv_sin_t = up(inverse[0].T), up(inverse[1].T)
         self.window2 = up(operators.window_squared())  # (16, 16)
+        self.inv_window2 = up(1.0 / operators.window_squared())  # (16, 16), Taichi's demosaic multiplies
         self.tex_weights_c = up(tc.colour_weights)  # (colours,)
         # Output channels in R, G, B order (internal colour order is R, B, G).
         self.channel_of_colour = up([0, 2, 1] if geo.colours == 3 else [0], wp.int32)
