@@ -162,74 +162,24 @@ def texture_combine(
     window2: F32_2D,
     rgba: F32_3D,
 ):
-    """Per pixel (tile, r, c) of one band's contributing tiles (``pix``, ``cmp``: the band's tiles, frame tiles
-    ``first`` on; ``finite``, ``rgba``: the whole frame's): weights (§7.3 a-d), colour = weighted mean of T,
-    alpha = W2 x mean weight, times the alpha fade, into the tile's contribution ``rgba`` (colours x
-    output_gain). window2: (16, 16) W2 = w(r)^2 w(c)^2."""
+    """One thread per row (tile, r) of one band's contributing tiles (``pix``, ``cmp``: the band's tiles, frame
+    tiles ``first`` on; ``finite``, ``rgba``: the whole frame's), per pixel: weights (§7.3 a-d), colour =
+    weighted mean of T, alpha = W2 x mean weight, times the alpha fade, into the tile's contribution ``rgba``
+    (colours x output_gain). window2: (16, 16) W2 = w(r)^2 w(c)^2."""
     xi = 1.0 / (2.0 * diff_sigma * diff_sigma)
-    for band_tile, r, c in ti.ndrange(pix.shape[0] // (cams * colours), SIDE, SIDE):
+    # Per rig constants, once: -xi / |offset_b - offset_a|^2 of each pair (a < b) and the colour weights.
+    pair_scale = ti.Vector.zero(ti.f32, cams * cams)
+    for a in ti.static(range(cams)):
+        for b in ti.static(range(a + 1, cams)):
+            ox = offsets[b, 0] - offsets[a, 0]
+            oy = offsets[b, 1] - offsets[a, 1]
+            pair_scale[a * cams + b] = -xi / (ox * ox + oy * oy)
+    cw = ti.Vector([colour_weights[k] for k in ti.static(range(colours))])
+    for band_tile, r in ti.ndrange(pix.shape[0] // (cams * colours), SIDE):
         tile = first + band_tile
         if finite[tile] != 0:
             base = band_tile * cams
-            m = ti.Matrix.zero(ti.f32, cams, colours)  # compared values M / W2
-            for cam, k in ti.static(ti.ndrange(cams, colours)):
-                m[cam, k] = cmp[(base + cam) * colours + k, r, c]
-            # a. pairwise agreement
-            w = ti.Vector.zero(ti.f32, cams)
-            for a in ti.static(range(cams)):
-                for b in ti.static(range(a + 1, cams)):
-                    d = 0.0
-                    for k in ti.static(range(colours)):
-                        diff = m[a, k] - m[b, k]
-                        d += colour_weights[k] * diff * diff
-                    ox = offsets[b, 0] - offsets[a, 0]
-                    oy = offsets[b, 1] - offsets[a, 1]
-                    v = ti.exp(-xi * d / (ox * ox + oy * oy)) + weight_floor
-                    w[a] += v
-                    w[b] += v
-            # b. the two best cameras (first index wins ties) and their weighted mean
-            best = 0
-            wb = w[0]
-            for cam in ti.static(range(1, cams)):
-                if w[cam] > wb:
-                    best, wb = cam, w[cam]
-            ws = -1.0  # weights are > 0: the first camera other than the best always replaces it
-            mb = ti.Vector.zero(ti.f32, colours)
-            ms = ti.Vector.zero(ti.f32, colours)
-            for cam in ti.static(range(cams)):
-                row = ti.Vector([m[cam, k] for k in ti.static(range(colours))])
-                if cam == best:
-                    mb = row
-                elif w[cam] > ws:
-                    ws, ms = w[cam], row
-            mean = (wb * mb + ws * ms) / (wb + ws)
-            # c. agreement of every camera with the two best cameras' mean
-            total = 0.0
-            for cam in ti.static(range(cams)):
-                d = 0.0
-                for k in ti.static(range(colours)):
-                    diff = m[cam, k] - mean[k]
-                    d += colour_weights[k] * diff * diff
-                w[cam] = ti.exp(-xi * d) + weight_floor
-                total += w[cam]
-            # d. dust removal
-            if dust_remove:
-                worst = 0
-                w_worst = w[0]
-                for cam in ti.static(range(1, cams)):
-                    if w[cam] < w_worst:
-                        worst, w_worst = cam, w[cam]
-                others = ti.cast(cams - 1, ti.f32)
-                mu = (total - w_worst) / others
-                boost = 1.0 + w_worst * (mu - w_worst) / (others * mu * mu)
-                total = 0.0
-                for cam in ti.static(range(cams)):
-                    if cam == worst:
-                        w[cam] = w_worst * w_worst / mu
-                    else:
-                        w[cam] = w[cam] * boost
-                    total += w[cam]
-            # e. colour and alpha, faded at the edge of the contributing region
+            out = tile * (colours + 1)
             ty = tile // tiles_x
             tx = tile - ty * tiles_x
             # Positions outside the frame count as contributing: only the region's edges inside the frame fade.
@@ -246,15 +196,72 @@ def texture_combine(
             east = 1
             if tx + 1 < tiles_x:
                 east = ti.cast(finite[tile + 1] != 0, ti.i32)
-            fade = alpha_fade(north, east, south, west, r, c)
-            out = tile * (colours + 1)
-            gain = output_gain * fade / total
-            for k in ti.static(range(colours)):
-                acc = 0.0
+            for c in range(SIDE):
+                m = ti.Matrix.zero(ti.f32, cams, colours)  # compared values M / W2
+                for cam, k in ti.static(ti.ndrange(cams, colours)):
+                    m[cam, k] = cmp[(base + cam) * colours + k, r, c]
+                # a. pairwise agreement
+                w = ti.Vector.zero(ti.f32, cams)
+                for a in ti.static(range(cams)):
+                    for b in ti.static(range(a + 1, cams)):
+                        d = 0.0
+                        for k in ti.static(range(colours)):
+                            diff = m[a, k] - m[b, k]
+                            d += cw[k] * diff * diff
+                        v = ti.exp(d * pair_scale[a * cams + b]) + weight_floor
+                        w[a] += v
+                        w[b] += v
+                # b. the two best cameras (first index wins ties) and their weighted mean
+                best = 0
+                wb = w[0]
+                for cam in ti.static(range(1, cams)):
+                    if w[cam] > wb:
+                        best, wb = cam, w[cam]
+                ws = -1.0  # weights are > 0: the first camera other than the best always replaces it
+                mb = ti.Vector.zero(ti.f32, colours)
+                ms = ti.Vector.zero(ti.f32, colours)
                 for cam in ti.static(range(cams)):
-                    acc += w[cam] * pix[(base + cam) * colours + k, r, c]
-                rgba[out + channel_of_colour[k], r, c] = gain * acc
-            rgba[out + colours, r, c] = fade * window2[r, c] * total / ti.cast(cams, ti.f32)
+                    row = ti.Vector([m[cam, k] for k in ti.static(range(colours))])
+                    if cam == best:
+                        mb = row
+                    elif w[cam] > ws:
+                        ws, ms = w[cam], row
+                mean = (wb * mb + ws * ms) * (1.0 / (wb + ws))
+                # c. agreement of every camera with the two best cameras' mean
+                total = 0.0
+                for cam in ti.static(range(cams)):
+                    d = 0.0
+                    for k in ti.static(range(colours)):
+                        diff = m[cam, k] - mean[k]
+                        d += cw[k] * diff * diff
+                    w[cam] = ti.exp(-xi * d) + weight_floor
+                    total += w[cam]
+                # d. dust removal
+                if dust_remove:
+                    worst = 0
+                    w_worst = w[0]
+                    for cam in ti.static(range(1, cams)):
+                        if w[cam] < w_worst:
+                            worst, w_worst = cam, w[cam]
+                    others = ti.cast(cams - 1, ti.f32)
+                    mu = (total - w_worst) / others
+                    boost = 1.0 + w_worst * (mu - w_worst) / (others * mu * mu)
+                    total = 0.0
+                    for cam in ti.static(range(cams)):
+                        if cam == worst:
+                            w[cam] = w_worst * w_worst / mu
+                        else:
+                            w[cam] = w[cam] * boost
+                        total += w[cam]
+                # e. colour and alpha, faded at the edge of the contributing region
+                fade = alpha_fade(north, east, south, west, r, c)
+                gain = output_gain * fade / total
+                for k in ti.static(range(colours)):
+                    acc = 0.0
+                    for cam in ti.static(range(cams)):
+                        acc += w[cam] * pix[(base + cam) * colours + k, r, c]
+                    rgba[out + channel_of_colour[k], r, c] = gain * acc
+                rgba[out + colours, r, c] = fade * window2[r, c] * total / ti.cast(cams, ti.f32)
 
 
 @ti.kernel

@@ -11,7 +11,8 @@ atomics, so the texture is bit-reproducible on every device and thread count).
 Layouts: ``clt`` (tiles * cams * colours * 4, 8, 8); ``pix``/``cmp`` (tiles * cams * colours, 16, 16) = the
 IMCLT tiles T and the compared values M / W2 (kept unwindowed: dividing a windowed value by the tiny corner
 window again would cost float32 precision); ``weights`` (band tiles * cams, 16, 16); ``rgba`` (tiles *
-channels, 16, 16) per-tile contributions in output channel order; ``canvas`` (channels, H + 8, W + 8), image pixel u at canvas u + 4.
+channels, 16, 16) per-tile contributions in output channel order; ``canvas`` (channels, H + 8, W + 8), image
+pixel u at canvas u + 4.
 """
 
 import warp as wp
@@ -177,7 +178,7 @@ def texture_combine(
             for k in range(colours):
                 diff = cmp[(base + a) * colours + k, r, c] - cmp[(base + b) * colours + k, r, c]
                 d += colour_weights[k] * diff * diff
-            v = wp.exp(-xi * d / wp.length_sq(offsets[b] - offsets[a])) + weight_floor
+            v = wp.exp(d * (-xi / wp.length_sq(offsets[b] - offsets[a]))) + weight_floor
             weights[base + a, r, c] = weights[base + a, r, c] + v
             weights[base + b, r, c] = weights[base + b, r, c] + v
     # b. the two best cameras (first index wins ties)
@@ -199,7 +200,8 @@ def texture_combine(
     for cam in range(cams):
         d = float(0.0)
         for k in range(colours):
-            mean = (wb * cmp[(base + best) * colours + k, r, c] + ws * cmp[(base + second) * colours + k, r, c]) / (wb + ws)
+            mean = (wb * cmp[(base + best) * colours + k, r, c] + ws * cmp[(base + second) * colours + k, r, c]) * (
+                1.0 / (wb + ws))
             diff = cmp[(base + cam) * colours + k, r, c] - mean
             d += colour_weights[k] * diff * diff
         weights[base + cam, r, c] = wp.exp(-xi * d) + weight_floor
