@@ -1,40 +1,77 @@
 """Taichi twin of kernels/texture.py: shift-corrected CLT tiles -> RGBA image with alpha from the cameras'
 agreement (tile_processor.md §7.3, §7.4), spread over every core.
 
-The same launches, arguments, tables and layouts as the Warp module (see there): ``texture_imclt`` (one thread
-per tile, camera and colour: low-pass and inverse MCLT as two matrix products per quadrant), ``texture_demosaic``
-(per pixel), ``texture_combine`` (per pixel: camera weights, colour, alpha and the alpha fade, into the
-tile's RGBA contribution), ``overlap_add`` (per canvas pixel, fixed order, no atomics). Bool masks are uint8
-views; ``offsets`` is (cams, 2).
+The same math, tables and layouts as the Warp module (see there), in three launches shaped for CPU threads:
+``texture_imclt`` (one thread per tile, camera and colour: low-pass and inverse MCLT as two matrix products per
+quadrant, then the demosaic filter and compression of its rows as soon as the next row exists - the Warp
+module's ``texture_imclt`` + ``texture_demosaic``), ``texture_combine`` (per pixel of one band's tiles: camera
+weights in registers, colour, alpha and the alpha fade, written straight into the tile's slot of ``rgba``),
+``overlap_add`` (per canvas pixel, fixed order, no atomics). ``cams`` and ``colours`` are compile-time
+(``ti.template``): one kernel per rig shape, loops over cameras unrolled. Bool masks are uint8 views;
+``offsets`` is (cams, 2); ``inv_window2`` is 1 / W2 (16, 16).
 """
 
 import taichi as ti
 
+from tpnet_gpu import operators
 from tpnet_gpu.kernels.taichi_types import F32_1D, F32_2D, F32_3D, I32_1D, U8_1D
 from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
 from tpnet_gpu.tables import TILE_SIZE as SIDE  # window side, pixels
+
+# (2, 16, 8) the inverse operators (the values Buffers uploads as inv_cos, inv_sin) as compile-time constants:
+# the column products, unrolled, fold them into the instructions (measured: IMCLT -22 %); the row products
+# index them by a loop variable and read the uploaded tables.
+INVERSE = operators.inverse_axes().astype("float32").tolist()
+
+
+@ti.func
+def compress(v: ti.f32, scale_shot: ti.f32, min_shot: ti.f32, linear: ti.f32) -> ti.f32:
+    """Shot-noise compression: scale sqrt(v) above min_shot, the tangent line ``linear`` v below."""
+    out = linear * v
+    if v > min_shot:
+        out = scale_shot * ti.sqrt(v)
+    return out
+
+
+@ti.func
+def demosaic_row(above, mid, below, centre: ti.f32, corner: ti.f32):
+    """Filtered interior row of M / W2 (16,): centre x mid + 1/8 x the 4 edge neighbours + corner x the 4
+    diagonal ones (R, B: 1/4, 1/16; G: 1/2, 0); columns 0 and 15 stay unfiltered."""
+    out = mid
+    for c in ti.static(range(1, SIDE - 1)):
+        edge = above[c] + below[c] + mid[c - 1] + mid[c + 1]
+        diagonal = above[c - 1] + above[c + 1] + below[c - 1] + below[c + 1]
+        out[c] = centre * mid[c] + 0.125 * edge + corner * diagonal
+    return out
 
 
 @ti.kernel
 def texture_imclt(
     clt: F32_3D,
     finite: U8_1D,
-    cams: ti.i32,
-    colours: ti.i32,
+    cams: ti.template(),
+    colours: ti.template(),
     lpf: F32_3D,
     inv_cos: F32_2D,
     inv_sin: F32_2D,
+    inv_window2: F32_2D,
+    scale_shot: ti.f32,
+    min_shot: ti.f32,
     pix: F32_3D,
+    cmp: F32_3D,
 ):
     """One thread per (tile, camera, colour) of finite tiles. lpf: (colours, 8, 8); inv_*: (16, 8) per-axis
-    inverse operators; pix out: T = sum_q G_{q>>1} (L X_q) G_{q&1}^T (16, 16)."""
+    inverse operators; pix out: T = sum_q G_{q>>1} (L X_q) G_{q&1}^T (16, 16); cmp out: M / W2 =
+    compress(filter3x3(T / W2)) on the 14x14 interior (R, B: [1 2 1; 2 4 2; 1 2 1] / 16; G: [0 1 0; 1 4 1;
+    0 1 0] / 8), border unfiltered; mono: T / W2."""
+    linear = scale_shot / ti.sqrt(min_shot)
     for tile, cam, colour in ti.ndrange(finite.shape[0], cams, colours):
         if finite[tile] != 0:
             base = ((tile * cams + cam) * colours + colour) * 4
             # Column side first: U_q = (L X_q) G_{q&1}^T, (8, 16) each; then T = G_c (U_0 + U_1) + G_s (U_2 + U_3).
             u_cos = ti.Matrix.zero(ti.f32, N, SIDE)  # vertical cosine rows: U_0 + U_1
             u_sin = ti.Matrix.zero(ti.f32, N, SIDE)  # vertical sine rows: U_2 + U_3
-            for ky in range(N):
+            for ky in ti.static(range(N)):
                 for kx in ti.static(range(N)):
                     low = lpf[colour, ky, kx]
                     x0 = clt[base + 0, ky, kx] * low
@@ -42,11 +79,17 @@ def texture_imclt(
                     x2 = clt[base + 2, ky, kx] * low
                     x3 = clt[base + 3, ky, kx] * low
                     for c in ti.static(range(SIDE)):
-                        gc = inv_cos[c, kx]
-                        gs = inv_sin[c, kx]
+                        gc = ti.static(INVERSE[0][c][kx])
+                        gs = ti.static(INVERSE[1][c][kx])
                         u_cos[ky, c] += x0 * gc + x1 * gs
                         u_sin[ky, c] += x2 * gc + x3 * gs
             out = (tile * cams + cam) * colours + colour
+            # The 3x3 filter of row r - 1 runs once row r exists: three rows of T / W2 live at a time.
+            centre, corner = 0.25, 0.0625  # R, B
+            if colour == 2:  # G (colours R, B, G)
+                centre, corner = 0.5, 0.0
+            above = ti.Vector.zero(ti.f32, SIDE)
+            mid = ti.Vector.zero(ti.f32, SIDE)
             for r in range(SIDE):
                 row = ti.Vector.zero(ti.f32, SIDE)
                 for ky in ti.static(range(N)):
@@ -54,46 +97,25 @@ def texture_imclt(
                     gs = inv_sin[r, ky]
                     for c in ti.static(range(SIDE)):
                         row[c] += gc * u_cos[ky, c] + gs * u_sin[ky, c]
+                below = ti.Vector.zero(ti.f32, SIDE)
                 for c in ti.static(range(SIDE)):
                     pix[out, r, c] = row[c]
-
-
-@ti.kernel
-def texture_demosaic(
-    pix: F32_3D,
-    finite: U8_1D,
-    cams: ti.i32,
-    colours: ti.i32,
-    scale_shot: ti.f32,
-    min_shot: ti.f32,
-    window2: F32_2D,
-    cmp: F32_3D,
-):
-    """Per pixel of every (tile, camera, colour): M / W2 = compress(filter3x3(T / W2)) on the 14x14 interior
-    (R, B: [1 2 1; 2 4 2; 1 2 1] / 16; G: [0 1 0; 1 4 1; 0 1 0] / 8), border unfiltered; mono: T / W2.
-    window2: (16, 16) W2 = w(r)^2 w(c)^2 (the Warp kernel evaluates it in place)."""
-    for i, r, c in pix:
-        if finite[i // (cams * colours)] != 0:
-            v = pix[i, r, c] / window2[r, c]
-            if colours == 1:
-                cmp[i, r, c] = v
-            else:
-                if r > 0 and r < SIDE - 1 and c > 0 and c < SIDE - 1:
-                    acc = 0.0
-                    green = (i % colours) == 2
-                    for dy, dx in ti.static(ti.ndrange((-1, 2), (-1, 2))):
-                        u = pix[i, r + dy, c + dx] / window2[r + dy, c + dx]
-                        if green:
-                            wgt = 0.5 if dy == 0 and dx == 0 else (0.125 if dy == 0 or dx == 0 else 0.0)
-                            acc += wgt * u
-                        else:
-                            acc += (2 - abs(dy)) * (2 - abs(dx)) / 16.0 * u
-                    v = acc
-                if v > min_shot:
-                    v = scale_shot * ti.sqrt(v)
-                else:
-                    v = scale_shot * v / ti.sqrt(min_shot)
-                cmp[i, r, c] = v
+                    below[c] = row[c] * inv_window2[r, c]
+                if ti.static(colours == 1):
+                    for c in ti.static(range(SIDE)):
+                        cmp[out, r, c] = below[c]
+                elif r == 0:  # border row: unfiltered
+                    for c in ti.static(range(SIDE)):
+                        cmp[out, 0, c] = compress(below[c], scale_shot, min_shot, linear)
+                elif r > 1:
+                    done = demosaic_row(above, mid, below, centre, corner)
+                    for c in ti.static(range(SIDE)):
+                        cmp[out, r - 1, c] = compress(done[c], scale_shot, min_shot, linear)
+                above = mid
+                mid = below
+            if ti.static(colours != 1):
+                for c in ti.static(range(SIDE)):  # row 15: unfiltered
+                    cmp[out, SIDE - 1, c] = compress(mid[c], scale_shot, min_shot, linear)
 
 
 @ti.func
@@ -131,10 +153,11 @@ def texture_combine(
     pix: F32_3D,
     cmp: F32_3D,
     finite: U8_1D,
+    first: ti.i32,
     tiles_x: ti.i32,
     tiles_y: ti.i32,
-    cams: ti.i32,
-    colours: ti.i32,
+    cams: ti.template(),
+    colours: ti.template(),
     offsets: F32_2D,
     colour_weights: F32_1D,
     channel_of_colour: I32_1D,
@@ -143,75 +166,26 @@ def texture_combine(
     dust_remove: ti.i32,
     output_gain: ti.f32,
     window2: F32_2D,
-    weights: F32_3D,
     rgba: F32_3D,
 ):
-    """Per pixel (tile, r, c) of contributing tiles: weights (§7.3 a-d), colour = weighted mean of T, alpha =
-    W2 x mean weight, times the alpha fade, into the tile's contribution ``rgba`` (colours x output_gain).
-    window2 as in texture_demosaic."""
-    for tile, r, c in ti.ndrange(finite.shape[0], SIDE, SIDE):
+    """One thread per row (tile, r) of one band's contributing tiles (``pix``, ``cmp``: the band's tiles, frame
+    tiles ``first`` on; ``finite``, ``rgba``: the whole frame's), per pixel: weights (§7.3 a-d), colour =
+    weighted mean of T, alpha = W2 x mean weight, times the alpha fade, into the tile's contribution ``rgba``
+    (colours x output_gain). window2: (16, 16) W2 = w(r)^2 w(c)^2."""
+    xi = 1.0 / (2.0 * diff_sigma * diff_sigma)
+    # Per rig constants, once: -xi / |offset_b - offset_a|^2 of each pair (a < b) and the colour weights.
+    pair_scale = ti.Vector.zero(ti.f32, cams * cams)
+    for a in ti.static(range(cams)):
+        for b in ti.static(range(a + 1, cams)):
+            ox = offsets[b, 0] - offsets[a, 0]
+            oy = offsets[b, 1] - offsets[a, 1]
+            pair_scale[a * cams + b] = -xi / (ox * ox + oy * oy)
+    cw = ti.Vector([colour_weights[k] for k in ti.static(range(colours))])
+    for band_tile, r in ti.ndrange(pix.shape[0] // (cams * colours), SIDE):
+        tile = first + band_tile
         if finite[tile] != 0:
-            w2 = window2[r, c]
-            xi = 1.0 / (2.0 * diff_sigma * diff_sigma)
-            base = tile * cams
-            # a. pairwise agreement
-            for cam in range(cams):
-                weights[base + cam, r, c] = 0.0
-            for a in range(cams):
-                for b in range(a + 1, cams):
-                    d = 0.0
-                    for k in range(colours):
-                        diff = cmp[(base + a) * colours + k, r, c] - cmp[(base + b) * colours + k, r, c]
-                        d += colour_weights[k] * diff * diff
-                    ox = offsets[b, 0] - offsets[a, 0]
-                    oy = offsets[b, 1] - offsets[a, 1]
-                    v = ti.exp(-xi * d / (ox * ox + oy * oy)) + weight_floor
-                    weights[base + a, r, c] = weights[base + a, r, c] + v
-                    weights[base + b, r, c] = weights[base + b, r, c] + v
-            # b. the two best cameras (first index wins ties)
-            best = 0
-            for cam in range(1, cams):
-                if weights[base + cam, r, c] > weights[base + best, r, c]:
-                    best = cam
-            second = -1
-            for cam in range(cams):
-                if cam != best:
-                    if second < 0:
-                        second = cam
-                    elif weights[base + cam, r, c] > weights[base + second, r, c]:
-                        second = cam
-            wb = weights[base + best, r, c]
-            ws = weights[base + second, r, c]
-            # c. agreement of every camera with the two best cameras' mean
-            total = 0.0
-            for cam in range(cams):
-                d = 0.0
-                for k in range(colours):
-                    mean = (wb * cmp[(base + best) * colours + k, r, c]
-                            + ws * cmp[(base + second) * colours + k, r, c]) / (wb + ws)
-                    diff = cmp[(base + cam) * colours + k, r, c] - mean
-                    d += colour_weights[k] * diff * diff
-                weights[base + cam, r, c] = ti.exp(-xi * d) + weight_floor
-                total += weights[base + cam, r, c]
-            # d. dust removal
-            if dust_remove:
-                worst = 0
-                for cam in range(1, cams):
-                    if weights[base + cam, r, c] < weights[base + worst, r, c]:
-                        worst = cam
-                w_worst = weights[base + worst, r, c]
-                others = ti.cast(cams - 1, ti.f32)
-                mu = (total - w_worst) / others
-                total = 0.0
-                for cam in range(cams):
-                    w = weights[base + cam, r, c]
-                    if cam == worst:
-                        w = w_worst * w_worst / mu
-                    else:
-                        w = w * (1.0 + w_worst * (mu - w_worst) / (others * mu * mu))
-                    weights[base + cam, r, c] = w
-                    total += w
-            # e. colour and alpha, faded at the edge of the contributing region, overlap-added
+            base = band_tile * cams
+            out = tile * (colours + 1)
             ty = tile // tiles_x
             tx = tile - ty * tiles_x
             # Positions outside the frame count as contributing: only the region's edges inside the frame fade.
@@ -228,29 +202,89 @@ def texture_combine(
             east = 1
             if tx + 1 < tiles_x:
                 east = ti.cast(finite[tile + 1] != 0, ti.i32)
-            fade = alpha_fade(north, east, south, west, r, c)
-            out = tile * (colours + 1)
-            for k in range(colours):
-                acc = 0.0
-                for cam in range(cams):
-                    acc += weights[base + cam, r, c] * pix[(base + cam) * colours + k, r, c]
-                rgba[out + channel_of_colour[k], r, c] = output_gain * fade * acc / total
-            rgba[out + colours, r, c] = fade * w2 * total / ti.cast(cams, ti.f32)
+            for c in range(SIDE):
+                m = ti.Matrix.zero(ti.f32, cams, colours)  # compared values M / W2
+                for cam, k in ti.static(ti.ndrange(cams, colours)):
+                    m[cam, k] = cmp[(base + cam) * colours + k, r, c]
+                # a. pairwise agreement
+                w = ti.Vector.zero(ti.f32, cams)
+                for a in ti.static(range(cams)):
+                    for b in ti.static(range(a + 1, cams)):
+                        d = 0.0
+                        for k in ti.static(range(colours)):
+                            diff = m[a, k] - m[b, k]
+                            d += cw[k] * diff * diff
+                        v = ti.exp(d * pair_scale[a * cams + b]) + weight_floor
+                        w[a] += v
+                        w[b] += v
+                # b. the two best cameras (first index wins ties) and their weighted mean
+                best = 0
+                wb = w[0]
+                for cam in ti.static(range(1, cams)):
+                    if w[cam] > wb:
+                        best, wb = cam, w[cam]
+                ws = -1.0  # weights are > 0: the first camera other than the best always replaces it
+                mb = ti.Vector.zero(ti.f32, colours)
+                ms = ti.Vector.zero(ti.f32, colours)
+                for cam in ti.static(range(cams)):
+                    row = ti.Vector([m[cam, k] for k in ti.static(range(colours))])
+                    if cam == best:
+                        mb = row
+                    elif w[cam] > ws:
+                        ws, ms = w[cam], row
+                mean = (wb * mb + ws * ms) * (1.0 / (wb + ws))
+                # c. agreement of every camera with the two best cameras' mean
+                total = 0.0
+                for cam in ti.static(range(cams)):
+                    d = 0.0
+                    for k in ti.static(range(colours)):
+                        diff = m[cam, k] - mean[k]
+                        d += cw[k] * diff * diff
+                    w[cam] = ti.exp(-xi * d) + weight_floor
+                    total += w[cam]
+                # d. dust removal
+                if dust_remove:
+                    worst = 0
+                    w_worst = w[0]
+                    for cam in ti.static(range(1, cams)):
+                        if w[cam] < w_worst:
+                            worst, w_worst = cam, w[cam]
+                    others = ti.cast(cams - 1, ti.f32)
+                    mu = (total - w_worst) / others
+                    boost = 1.0 + w_worst * (mu - w_worst) / (others * mu * mu)
+                    total = 0.0
+                    for cam in ti.static(range(cams)):
+                        if cam == worst:
+                            w[cam] = w_worst * w_worst / mu
+                        else:
+                            w[cam] = w[cam] * boost
+                        total += w[cam]
+                # e. colour and alpha, faded at the edge of the contributing region
+                fade = alpha_fade(north, east, south, west, r, c)
+                gain = output_gain * fade / total
+                for k in ti.static(range(colours)):
+                    acc = 0.0
+                    for cam in ti.static(range(cams)):
+                        acc += w[cam] * pix[(base + cam) * colours + k, r, c]
+                    rgba[out + channel_of_colour[k], r, c] = gain * acc
+                rgba[out + colours, r, c] = fade * window2[r, c] * total / ti.cast(cams, ti.f32)
 
 
 @ti.kernel
 def overlap_add(rgba: F32_3D, finite: U8_1D, tiles_x: ti.i32, tiles_y: ti.i32, canvas: F32_3D):
     """canvas[ch, y, x] = sum of the contributing tiles' ``rgba`` covering (y, x), tiles in row-major order (the
-    Warp kernel's order: bit-reproducible with any thread count); every canvas pixel is written."""
-    for ch, y, x in canvas:
+    Warp kernel's order: bit-reproducible with any thread count); every canvas pixel is written. One thread per
+    8 pixels of a canvas row: the same up to 4 tiles cover them (canvas width W + 8, a multiple of 8)."""
+    for ch, y, block in ti.ndrange(canvas.shape[0], canvas.shape[1], canvas.shape[2] // 8):
         channels = canvas.shape[0]
-        acc = 0.0
-        for dy in ti.static(range(2)):
-            for dx in ti.static(range(2)):
-                ty = y // 8 - 1 + dy
-                tx = x // 8 - 1 + dx
-                if ty >= 0 and ty < tiles_y and tx >= 0 and tx < tiles_x:
-                    tile = ty * tiles_x + tx
-                    if finite[tile] != 0:
-                        acc += rgba[tile * channels + ch, y - 8 * ty, x - 8 * tx]
-        canvas[ch, y, x] = acc
+        acc = ti.Vector.zero(ti.f32, 8)
+        for dy, dx in ti.static(ti.ndrange(2, 2)):
+            ty = y // 8 - 1 + dy
+            tx = block - 1 + dx
+            if ty >= 0 and ty < tiles_y and tx >= 0 and tx < tiles_x:
+                tile = ty * tiles_x + tx
+                if finite[tile] != 0:
+                    for i in ti.static(range(8)):
+                        acc[i] += rgba[tile * channels + ch, y - 8 * ty, i + 8 * (1 - dx)]
+        for i in ti.static(range(8)):
+            canvas[ch, y, 8 * block + i] = acc[i]

@@ -3,15 +3,16 @@
 
 Four launches: ``texture_imclt`` (one block per tile: low-pass and inverse MCLT of every camera and colour as
 two matrix products per quadrant), ``texture_demosaic`` (per pixel: 3x3 filter of the zero-filled colours and
-shot-noise compression), ``texture_combine`` (per tile pixel: camera weights, colour, alpha and the alpha fade at
-the edge of the processed region, into the tile's RGBA contribution), ``overlap_add`` (per canvas pixel: the sum
-of the up to 4 tiles that cover it, in a fixed order - no float atomics, so the texture is bit-reproducible on
-every device and thread count).
+shot-noise compression), ``texture_combine`` (per pixel of one band's tiles: camera weights, colour, alpha and
+the alpha fade at the edge of the processed region, into the tile's slot of the RGBA contributions),
+``overlap_add`` (per canvas pixel: the sum of the up to 4 tiles that cover it, in a fixed order - no float
+atomics, so the texture is bit-reproducible on every device and thread count).
 
 Layouts: ``clt`` (tiles * cams * colours * 4, 8, 8); ``pix``/``cmp`` (tiles * cams * colours, 16, 16) = the
 IMCLT tiles T and the compared values M / W2 (kept unwindowed: dividing a windowed value by the tiny corner
-window again would cost float32 precision); ``weights`` (tiles * cams, 16, 16); ``rgba`` (tiles * channels, 16, 16) per-tile
-contributions in output channel order; ``canvas`` (channels, H + 8, W + 8), image pixel u at canvas u + 4.
+window again would cost float32 precision); ``weights`` (band tiles * cams, 16, 16); ``rgba`` (tiles *
+channels, 16, 16) per-tile contributions in output channel order; ``canvas`` (channels, H + 8, W + 8), image
+pixel u at canvas u + 4.
 """
 
 import warp as wp
@@ -65,6 +66,14 @@ def window_sq(r: int, c: int) -> float:
     return wr * wr * wc * wc
 
 
+@wp.func
+def compress(v: float, scale_shot: float, min_shot: float, linear: float) -> float:
+    """Shot-noise compression: scale sqrt(v) above min_shot, the tangent line ``linear`` v below."""
+    if v > min_shot:
+        return scale_shot * wp.sqrt(v)
+    return linear * v
+
+
 @wp.kernel
 def texture_demosaic(
     pix: wp.array3d(dtype=wp.float32),
@@ -73,38 +82,32 @@ def texture_demosaic(
     colours: int,
     scale_shot: float,
     min_shot: float,
+    inv_window2: wp.array2d(dtype=wp.float32),
     cmp: wp.array3d(dtype=wp.float32),
 ):
     """Per pixel of every (tile, camera, colour): M / W2 = compress(filter3x3(T / W2)) on the 14x14 interior
-    (R, B: [1 2 1; 2 4 2; 1 2 1] / 16; G: [0 1 0; 1 4 1; 0 1 0] / 8), border unfiltered; mono: T / W2."""
+    (R, B: [1 2 1; 2 4 2; 1 2 1] / 16; G: [0 1 0; 1 4 1; 0 1 0] / 8, as centre x T + 1/8 x the 4 edge
+    neighbours + corner x the 4 diagonal ones), border unfiltered; mono: T / W2. inv_window2: (16, 16) 1 / W2."""
     i, r, c = wp.tid()
     if not finite[i // (cams * colours)]:
         return
-    v = pix[i, r, c] / window_sq(r, c)
+    v = pix[i, r, c] * inv_window2[r, c]
     if colours == 1:
         cmp[i, r, c] = v
         return
     if r > 0 and r < 15 and c > 0 and c < 15:
-        acc = float(0.0)
-        green = (i % colours) == 2
-        for dy in range(-1, 2):
-            for dx in range(-1, 2):
-                u = pix[i, r + dy, c + dx] / window_sq(r + dy, c + dx)
-                if green:
-                    wgt = 0.0
-                    if dy == 0 and dx == 0:
-                        wgt = 0.5
-                    elif dy == 0 or dx == 0:
-                        wgt = 0.125
-                    acc += wgt * u
-                else:
-                    acc += float((2 - wp.abs(dy)) * (2 - wp.abs(dx))) / 16.0 * u
-        v = acc
-    if v > min_shot:
-        v = scale_shot * wp.sqrt(v)
-    else:
-        v = scale_shot * v / wp.sqrt(min_shot)
-    cmp[i, r, c] = v
+        centre = 0.25  # R, B
+        corner = 0.0625
+        if (i % colours) == 2:  # G (colours R, B, G)
+            centre = 0.5
+            corner = 0.0
+        edge = (pix[i, r - 1, c] * inv_window2[r - 1, c] + pix[i, r + 1, c] * inv_window2[r + 1, c]
+                + pix[i, r, c - 1] * inv_window2[r, c - 1] + pix[i, r, c + 1] * inv_window2[r, c + 1])
+        diagonal = (pix[i, r - 1, c - 1] * inv_window2[r - 1, c - 1] + pix[i, r - 1, c + 1] * inv_window2[r - 1, c + 1]
+                    + pix[i, r + 1, c - 1] * inv_window2[r + 1, c - 1]
+                    + pix[i, r + 1, c + 1] * inv_window2[r + 1, c + 1])
+        v = centre * v + 0.125 * edge + corner * diagonal
+    cmp[i, r, c] = compress(v, scale_shot, min_shot, scale_shot / wp.sqrt(min_shot))
 
 
 @wp.func
@@ -140,6 +143,7 @@ def texture_combine(
     pix: wp.array3d(dtype=wp.float32),
     cmp: wp.array3d(dtype=wp.float32),
     finite: wp.array(dtype=wp.bool),
+    first: int,
     tiles_x: int,
     tiles_y: int,
     cams: int,
@@ -154,14 +158,17 @@ def texture_combine(
     weights: wp.array3d(dtype=wp.float32),
     rgba: wp.array3d(dtype=wp.float32),
 ):
-    """Per pixel (tile, r, c) of contributing tiles: weights (§7.3 a-d), colour = weighted mean of T, alpha =
-    W2 x mean weight, times the alpha fade, into the tile's contribution ``rgba`` (colours x output_gain)."""
-    tile, r, c = wp.tid()
+    """Per pixel (tile, r, c) of one band's contributing tiles (``pix``, ``cmp``, ``weights``: the band's tiles,
+    frame tiles ``first`` on; ``finite``, ``rgba``: the whole frame's): weights (§7.3 a-d), colour = weighted
+    mean of T, alpha = W2 x mean weight, times the alpha fade, into the tile's contribution ``rgba`` (colours x
+    output_gain)."""
+    band_tile, r, c = wp.tid()
+    tile = first + band_tile
     if not finite[tile]:
         return
     w2 = window_sq(r, c)
     xi = 1.0 / (2.0 * diff_sigma * diff_sigma)
-    base = tile * cams
+    base = band_tile * cams
     # a. pairwise agreement
     for cam in range(cams):
         weights[base + cam, r, c] = 0.0
@@ -171,7 +178,7 @@ def texture_combine(
             for k in range(colours):
                 diff = cmp[(base + a) * colours + k, r, c] - cmp[(base + b) * colours + k, r, c]
                 d += colour_weights[k] * diff * diff
-            v = wp.exp(-xi * d / wp.length_sq(offsets[b] - offsets[a])) + weight_floor
+            v = wp.exp(d * (-xi / wp.length_sq(offsets[b] - offsets[a]))) + weight_floor
             weights[base + a, r, c] = weights[base + a, r, c] + v
             weights[base + b, r, c] = weights[base + b, r, c] + v
     # b. the two best cameras (first index wins ties)
@@ -193,7 +200,8 @@ def texture_combine(
     for cam in range(cams):
         d = float(0.0)
         for k in range(colours):
-            mean = (wb * cmp[(base + best) * colours + k, r, c] + ws * cmp[(base + second) * colours + k, r, c]) / (wb + ws)
+            mean = (wb * cmp[(base + best) * colours + k, r, c] + ws * cmp[(base + second) * colours + k, r, c]) * (
+                1.0 / (wb + ws))
             diff = cmp[(base + cam) * colours + k, r, c] - mean
             d += colour_weights[k] * diff * diff
         weights[base + cam, r, c] = wp.exp(-xi * d) + weight_floor
@@ -226,11 +234,12 @@ def texture_combine(
     east = tx + 1 == tiles_x or finite[tile + 1]
     fade = alpha_fade(north, east, south, west, r, c)
     out = tile * (colours + 1)
+    gain = output_gain * fade / total
     for k in range(colours):
         acc = float(0.0)
         for cam in range(cams):
             acc += weights[base + cam, r, c] * pix[(base + cam) * colours + k, r, c]
-        rgba[out + channel_of_colour[k], r, c] = output_gain * fade * acc / total
+        rgba[out + channel_of_colour[k], r, c] = gain * acc
     rgba[out + colours, r, c] = fade * w2 * total / float(cams)
 
 

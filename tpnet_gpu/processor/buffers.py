@@ -50,39 +50,30 @@ class TileResult:
 
 
 # Tile rows of one texture band: the texture's per-camera scratch is 1 KiB per tile, camera and colour (pix and
-# cmp) - 1.9 GB for a 5 MPix quad frame at once, 0.18 GB per band of 16 rows; the combine step also runs on the
-# band's 2 halo rows (it reads the neighbours' ``finite`` for the alpha fade): +2/16 of that step.
+# cmp) - 1.9 GB for a 5 MPix quad frame at once, 0.16 GB per band of 16 rows.
 TEXTURE_BAND_ROWS = 16
 
 
 def texture_band_tiles(tiles_y: int, tiles_x: int) -> int:
-    """Tiles the texture scratch holds: one band with its halo rows."""
-    return (min(TEXTURE_BAND_ROWS, tiles_y) + 2) * tiles_x
+    """Tiles the texture scratch holds: one band."""
+    return min(TEXTURE_BAND_ROWS, tiles_y) * tiles_x
 
 
 @dataclass(frozen=True)
 class TextureBand:
     """Views of one band of tile rows ``[first, last)`` for the texture steps (all contiguous, made once).
 
-    ``clt``, ``finite``: the band's tiles; ``pix``, ``cmp``: their slots in the scratch (after the top halo row);
-    ``span_*``: the band with its halo rows (``span_rows`` rows of tiles: ``finite`` of the processor, the
-    scratch from its start), which the combine step reads and writes; ``part``: the band's rows of
-    ``span_rgba``; ``rgba``: the same tiles of ``tex_rgba``, where ``part`` is copied."""
+    ``clt``, ``finite``: the band's tiles; ``pix``, ``cmp``, ``weights``: their slots in the scratch. The combine
+    step reads the whole frame's ``finite`` (the neighbours' for the alpha fade) and writes the band's tiles of
+    ``tex_rgba`` from frame tile ``first * tiles_x`` on."""
 
     first: int
     last: int
-    span_rows: int
     clt: wp.array
     finite: wp.array
     pix: wp.array
     cmp: wp.array
-    span_finite: wp.array
-    span_pix: wp.array
-    span_cmp: wp.array
-    span_weights: wp.array
-    span_rgba: wp.array
-    part: wp.array
-    rgba: wp.array
+    weights: wp.array
 
 
 class Buffers:
@@ -94,10 +85,9 @@ class Buffers:
     (tiles * pairs, 15, 15); ``layers`` (tiles, 4, 9, 9) or None; the fused pass's ``tasks`` (tiles,) int32,
     ``count`` (1,) int32 and ``scratch`` (slots * cams * U * 4, 8, 8) (``allocate_fused``; U: the used colours).
     Texture (``textures=True``): ``tex_rgba`` (tiles * (colours + 1), 16, 16) per-tile contributions, ``canvas``
-    (colours + 1, H + 8, W + 8), and the scratch of one band of ``TEXTURE_BAND_ROWS`` tile rows with a halo row
-    above and below (span = (rows + 2) * tiles_x tiles): ``tex_pix``, ``tex_cmp`` (span * cams * colours, 16,
-    16), ``tex_weights`` (span * cams, 16, 16), ``tex_part`` (span * (colours + 1), 16, 16); ``texture_bands``
-    the views of each band (``TextureBand``).
+    (colours + 1, H + 8, W + 8), and the scratch of one band of ``TEXTURE_BAND_ROWS`` tile rows (span =
+    ``texture_band_tiles``): ``tex_pix``, ``tex_cmp`` (span * cams * colours, 16, 16), ``tex_weights`` (span *
+    cams, 16, 16, Warp only); ``texture_bands`` the views of each band (``TextureBand``).
     """
 
     def __init__(self, geo: Geometry, config: CorrelationConfig, texture_config: TextureConfig | None,
@@ -196,7 +186,6 @@ class Buffers:
         self.tex_pix = self._zeros((span * geo.cams * geo.colours, *side))
         self.tex_cmp = self._zeros((span * geo.cams * geo.colours, *side))
         self.tex_weights = self._zeros((span * geo.cams, *side))
-        self.tex_part = self._zeros((span * channels, *side))
         self.tex_rgba = self._zeros((geo.tiles * channels, *side))
         self.texture_bands = [self._band(geo, first, min(first + TEXTURE_BAND_ROWS, geo.tiles_y))
                               for first in range(0, geo.tiles_y, TEXTURE_BAND_ROWS)]
@@ -208,6 +197,7 @@ class Buffers:
         self.inv_cos, self.inv_sin = up(inverse[0]), up(inverse[1])
         self.inv_cos_t, self.inv_sin_t = up(inverse[0].T), up(inverse[1].T)
         self.window2 = up(operators.window_squared())  # (16, 16)
+        self.inv_window2 = up(1.0 / operators.window_squared())  # (16, 16), the demosaic multiplies
         self.tex_weights_c = up(tc.colour_weights)  # (colours,)
         # Output channels in R, G, B order (internal colour order is R, B, G).
         self.channel_of_colour = up([0, 2, 1] if geo.colours == 3 else [0], wp.int32)
@@ -215,20 +205,13 @@ class Buffers:
         return self.canvas_t[:, margin : margin + geo.height, margin : margin + geo.width]
 
     def _band(self, geo: Geometry, first: int, last: int) -> TextureBand:
-        """The views of tile rows ``[first, last)`` with a halo row on each side inside the frame."""
-        top, bottom = max(first - 1, 0), min(last + 1, geo.tiles_y)
-        tx, per_tile, channels = geo.tiles_x, geo.cams * geo.colours, geo.colours + 1
-        inner, span, skip = (last - first) * tx, (bottom - top) * tx, (first - top) * tx  # tiles
-        start = first * tx
+        """The views of tile rows ``[first, last)``."""
+        per_tile = geo.cams * geo.colours
+        start, inner = first * geo.tiles_x, (last - first) * geo.tiles_x  # tiles
         return TextureBand(
-            first=first, last=last, span_rows=bottom - top,
+            first=first, last=last,
             clt=self.clt[start * per_tile * 4 : (start + inner) * per_tile * 4],
             finite=self.finite[start : start + inner],
-            pix=self.tex_pix[skip * per_tile : (skip + inner) * per_tile],
-            cmp=self.tex_cmp[skip * per_tile : (skip + inner) * per_tile],
-            span_finite=self.finite[top * tx : top * tx + span],
-            span_pix=self.tex_pix[: span * per_tile], span_cmp=self.tex_cmp[: span * per_tile],
-            span_weights=self.tex_weights[: span * geo.cams], span_rgba=self.tex_part[: span * channels],
-            part=self.tex_part[skip * channels : (skip + inner) * channels],
-            rgba=self.tex_rgba[start * channels : (start + inner) * channels],
+            pix=self.tex_pix[: inner * per_tile], cmp=self.tex_cmp[: inner * per_tile],
+            weights=self.tex_weights[: inner * geo.cams],
         )

@@ -101,14 +101,11 @@ class TaichiBackend:
         b, geo, tc, v = self.b, self.geo, self.texture_config, self._v
         for band in b.texture_bands:  # one band of tile rows at a time through the scratch (Buffers)
             taichi_texture.texture_imclt(v(band.clt), v(band.finite), geo.cams, geo.colours, v(b.tex_lpf),
-                                         v(b.inv_cos), v(b.inv_sin), v(band.pix))
-            taichi_texture.texture_demosaic(v(band.pix), v(band.finite), geo.cams, geo.colours, tc.scale_shot,
-                                            tc.min_shot, v(b.window2), v(band.cmp))
+                                         v(b.inv_cos), v(b.inv_sin), v(b.inv_window2), tc.scale_shot,
+                                         tc.min_shot, v(band.pix), v(band.cmp))
             taichi_texture.texture_combine(
-                v(band.span_pix), v(band.span_cmp), v(band.span_finite), geo.tiles_x, band.span_rows, geo.cams,
-                geo.colours, v(b.offsets), v(b.tex_weights_c), v(b.channel_of_colour), tc.diff_sigma,
-                tables.TEXTURE_WEIGHT_FLOOR, int(tc.dust_remove), tc.output_gain, v(b.window2),
-                v(band.span_weights), v(band.span_rgba),
+                v(band.pix), v(band.cmp), v(b.finite), band.first * geo.tiles_x, geo.tiles_x, geo.tiles_y,
+                geo.cams, geo.colours, v(b.offsets), v(b.tex_weights_c), v(b.channel_of_colour), tc.diff_sigma,
+                tables.TEXTURE_WEIGHT_FLOOR, int(tc.dust_remove), tc.output_gain, v(b.window2), v(b.tex_rgba),
             )
-            v(band.rgba).copy_(v(band.part))
         taichi_texture.overlap_add(v(b.tex_rgba), v(b.finite), geo.tiles_x, geo.tiles_y, v(b.canvas))

@@ -156,23 +156,22 @@ class WarpBackend:
     def _texture(self) -> None:
         b, geo, tc = self.b, self.geo, self.texture_config
         for band in b.texture_bands:  # one band of tile rows at a time through the scratch (Buffers)
-            tiles, span = band.finite.shape[0], band.span_finite.shape[0]
             self._tile_launch_n(
-                texture.texture_imclt, tiles,
+                texture.texture_imclt, band.finite.shape[0],
                 [band.clt, band.finite, geo.cams, geo.colours, b.tex_lpf, b.inv_cos, b.inv_sin, b.inv_cos_t,
                  b.inv_sin_t],
                 [band.pix],
             )
             self._thread_launch(texture.texture_demosaic, band.pix.shape,
-                                [band.pix, band.finite, geo.cams, geo.colours, tc.scale_shot, tc.min_shot],
+                                [band.pix, band.finite, geo.cams, geo.colours, tc.scale_shot, tc.min_shot,
+                                 b.inv_window2],
                                 [band.cmp])
             self._thread_launch(
-                texture.texture_combine, (span, *b.tex_pix.shape[1:]),
-                [band.span_pix, band.span_cmp, band.span_finite, geo.tiles_x, band.span_rows, geo.cams,
+                texture.texture_combine, (band.finite.shape[0], *b.tex_pix.shape[1:]),
+                [band.pix, band.cmp, b.finite, band.first * geo.tiles_x, geo.tiles_x, geo.tiles_y, geo.cams,
                  geo.colours, b.offsets, b.tex_weights_c, b.channel_of_colour, tc.diff_sigma,
                  tables.TEXTURE_WEIGHT_FLOOR, tc.dust_remove, tc.output_gain],
-                [band.span_weights, band.span_rgba],
+                [band.weights, b.tex_rgba],
             )
-            wp.copy(band.rgba, band.part)
         self._thread_launch(texture.overlap_add, b.canvas.shape, [b.tex_rgba, b.finite, geo.tiles_x, geo.tiles_y],
                             [b.canvas])
