@@ -27,7 +27,8 @@ class TileResult:
     Attributes:
         clt: ``(tiles, cams, colours, 4, 8, 8)`` frequency-domain tiles (CC, SC, CS, SS; colours R, B, G).
             Stale for inactive tiles, zero-filled windows where pixels were not finite. None unless the
-            processor keeps them (built with ``clt=True`` or ``textures=True``).
+            processor has the buffer (built with ``clt=True`` or ``textures=True``); after a ``measure`` they
+            are this pass's tiles only with ``clt=True`` (otherwise the fused pass does not write them).
         corr: ``(tiles, pairs, 15, 15)`` pair correlations, row = vertical lag + 7; zero where not computed.
         layers: ``(tiles, 4, 9, 9)`` network layers [hor, vert, diag-main, diag-other], or None unless the
             pairs are the quad's 6.
