@@ -99,13 +99,8 @@ def network_stage2(net: net_model.TPNet, features: torch.Tensor) -> torch.Tensor
     """Residuals ``(ty, tx)`` from stage-1 features: the second half of ``model.frame_residual`` (clone 0, all tiles
     active): 5x5 convolution over replicate-padded features, then the per-tile rest of stage 2."""
     stage2 = _params(net)[1]
-    ty, tx, n_features = features.shape
-    side, radius = net_model.CLUSTER_SIDE, net_model.CLUSTER_RADIUS
-    padded = F.pad(features.permute(2, 0, 1).unsqueeze(0), (radius,) * 4, mode="replicate")
-    weight, bias = stage2[0]
-    hidden = weight.shape[0]
-    kernel = weight.view(hidden, net_model.CLUSTER_TILES, n_features).transpose(1, 2)
-    kernel = kernel.reshape(hidden, n_features, side, side) * net_model.clone_masks(weight.device, weight.dtype)[0]
+    padded = F.pad(features.permute(2, 0, 1).unsqueeze(0), (net_model.CLUSTER_RADIUS,) * 4, mode="replicate")
+    kernel, bias = net_model.stage2_conv(stage2[0], (0,))  # (hidden, F, 5, 5): clone 0's masked kernels
     z = F.conv2d(padded, kernel, bias)[0].permute(1, 2, 0)  # (ty, tx, hidden)
     if len(stage2) == 1:
         return z.squeeze(-1)
