@@ -12,7 +12,6 @@ from __future__ import annotations
 import torch
 
 
-
 class CostVolume:
     """``(tiles_y, tiles_x, bins)`` combined correlations over bins ``d_min + j step``; -inf = not measured
     (the identity of the max that merges overlapping passes, so merging is one scatter with no host sync)."""

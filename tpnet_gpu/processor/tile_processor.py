@@ -41,7 +41,8 @@ class TileProcessor:
         kernels: optional aberration kernels in CLT form, ``(cams, colours, 4, 8, 8)`` (one per camera and
             colour) or ``(cams, rows, cols, colours, 4, 8, 8)`` on the 16-px kernel grid (node n at 16 n - 8).
         config: correlation parameters.
-        textures: also make the RGBA texture image in ``process`` (allocates its buffers; keeps the CLT tiles).
+        textures: also make the RGBA texture image in ``process`` and ``texture`` (allocates its buffers, the CLT
+            tiles' among them: the texture converts into them; ``measure`` stays fused).
         clt: keep the CLT tiles (``result.clt``, the ``convert``/``correlate`` stages); else ``measure`` runs the
             fused pass (module docstring).
         texture_config: texture parameters.
@@ -180,12 +181,7 @@ class TileProcessor:
             TileResult of torch tensors on the processor's device (views, overwritten by the next call).
         """
         self.set_targets(target_disparity, centres=centres, active=active)
-        return self.run_measurement()
-
-    def run_measurement(self) -> TileResult:
-        """Convert and correlate the loaded frames at the targets ``set_targets`` put in place: the split stages
-        when the CLT tiles are kept, else the fused pass (module docstring). Returns ``result``."""
-        self._run(self._pass)
+        self._run(self._pass)  # split with clt=True, else fused (module docstring)
         return self.result
 
     def process(self, frames, target_disparity=None, *, centres=None, active=None) -> TileResult:
