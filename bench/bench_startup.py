@@ -82,16 +82,6 @@ def process_once(scene: Path, out: Path, backend: str, root: Path) -> dict:
             "new_kernels": cache_entries(root) - before}
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        width, height = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise SystemExit(f"--sizes: expected WIDTHxHEIGHT (multiples of 8), got {text!r}") from None
-    if width < 16 or height < 16 or width % 8 or height % 8:
-        raise SystemExit(f"--sizes: expected WIDTHxHEIGHT (multiples of 8, at least 16), got {text!r}")
-    return width, height
-
-
 def _row(runs: list[dict]) -> dict:
     return {**{key: summary([r[key] for r in runs]) for key in ("wall_s", "cpu_s", "reported_s")},
             "new_kernels": [r["new_kernels"] for r in runs]}
@@ -108,7 +98,10 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
     if args.repeat < 1:
         parser.error("--repeat: expected at least 1")
-    sizes = [_size(s) for s in args.sizes]
+    try:
+        sizes = common.parse_sizes(",".join(args.sizes), "--sizes")
+    except ValueError as error:
+        parser.error(str(error))
 
     from tpnet_gpu import cli  # noqa: PLC0415 - the renderer, in this process
 

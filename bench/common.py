@@ -207,3 +207,20 @@ def run(main: Callable[[list[str] | None], dict], argv: list[str] | None = None)
             return 2
         return int(done.code or 0)
     return 0
+
+
+def parse_sizes(text: str, option: str) -> list[tuple[int, int]]:
+    """Frame sizes of the option ``option``: ``"640x480,2592x1936"`` -> [(640, 480), (2592, 1936)] (width x
+    height, multiples of 8, at least 16); '' -> []; ValueError naming ``option`` otherwise."""
+    sizes = []
+    for item in (s.strip() for s in text.split(",")):
+        if not item:
+            continue
+        try:
+            width, height = (int(v) for v in item.lower().split("x"))
+        except ValueError:
+            raise ValueError(f"{option}: expected WIDTHxHEIGHT[,WIDTHxHEIGHT...], got {text!r}") from None
+        if width < 16 or height < 16 or width % 8 or height % 8:
+            raise ValueError(f"{option}: expected multiples of 8, at least 16, got {item!r}")
+        sizes.append((width, height))
+    return sizes

@@ -32,6 +32,7 @@ from tpnet_gpu import tables
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.pipeline import Pipeline
 
+from . import common
 from .common import PAPER_GPU, PAPER_TP_MS, format_table, random_frames, summary, timed_ms
 from .throughput_common import agreement, log
 from .throughput_floor import H200, floor, network_work, pipeline_work, tp_pass, tp_steps
@@ -44,19 +45,8 @@ FULL_SIZE = (2592, 1936)
 
 
 def parse_sizes(text: str) -> list[tuple[int, int]]:
-    """``"640x480,2592x1936"`` -> [(640, 480), (2592, 1936)] (width x height); '' -> []."""
-    sizes = []
-    for item in (s.strip() for s in text.split(",")):
-        if not item:
-            continue
-        try:
-            width, height = (int(v) for v in item.lower().split("x"))
-        except ValueError:
-            raise ValueError(f"--pipeline-sizes: expected WIDTHxHEIGHT[,WIDTHxHEIGHT...], got {text!r}") from None
-        if width < 16 or height < 16 or width % 8 or height % 8:
-            raise ValueError(f"--pipeline-sizes: expected multiples of 8, at least 16, got {item!r}")
-        sizes.append((width, height))
-    return sizes
+    """``--pipeline-sizes``: ``"640x480,2592x1936"`` -> [(640, 480), (2592, 1936)] (width x height); '' -> []."""
+    return common.parse_sizes(text, "--pipeline-sizes")
 
 
 def scene_frames(width: int, height: int, scene: str, seed: int) -> np.ndarray:

@@ -92,3 +92,12 @@ def test_stage_clock_partitions_a_frame_and_changes_nothing():
     assert "run" not in vars(pipe.engine) and "texture" not in vars(pipe.network_tp)
     assert pipe._infer.__name__ == "infer" and type(pipe.engine).run is DisparityEngine.run
     assert pipe.engine.tp.pairs == tables.QUAD_PAIRS
+
+
+def test_startup_bench_rejects_a_bad_size(capsys):
+    """bench_startup reads its sizes with the same parser: a bad one exits with the option named."""
+    from tpnet_gpu.bench import bench_startup  # noqa: PLC0415
+
+    with pytest.raises(SystemExit):
+        bench_startup.main(["--sizes", "641x480"])
+    assert "--sizes: expected multiples of 8" in capsys.readouterr().err
