@@ -57,6 +57,24 @@ def test_build_resumes_and_rebuilds_identically(built, tmp_path):
         np.testing.assert_array_equal(again[f"target_{variant}"], first[f"target_{variant}"])
 
 
+def test_stored_raws_re_measure_to_the_stored_layers(built):
+    """The chunk's raw frames are the scene's (oracle: re-measuring them at the stored targets gives the stored
+    layers bit for bit), and ``measured`` marks the engine's tiles (unmeasured ones are ground truth + <= 2 px)."""
+    from tpnet_gpu.disparity import DisparityEngine
+
+    chunk = dataset.load(built, "train")[0]
+    assert chunk["raws"].shape == (4, SPEC.height, SPEC.width) and chunk["raws"].dtype == np.uint16
+    assert chunk["gt_surfaces"].shape[:2] == chunk["gt_disparity"].shape
+    engine = DisparityEngine(SPEC.height, SPEC.width, device="cpu")
+    frames = engine.normalise(chunk["raws"].astype(np.float32) - chunk["black_level"])
+    layers = dataset._layers(engine.tp, frames, chunk["target_near0"])
+    np.testing.assert_array_equal(layers, chunk["layers_near0"])
+    measured = chunk["measured"]
+    assert measured.dtype == bool and measured.any()
+    offset = np.abs(chunk["target_heuristic"] - chunk["gt_disparity"])[~measured]
+    assert np.all(offset <= SPEC.random_offset + 1e-5)
+
+
 def test_network_layers_are_green_only_as_the_baseline():
     assert SPEC.correlation().colour_weights == (0.0, 0.0, 1.0)
     assert SPEC.variants() == ("heuristic", "random", "near0", "near1")
@@ -66,7 +84,7 @@ def test_old_data_set_version_is_refused(built, tmp_path):
     manifest = json.loads((built / "manifest.json").read_text())
     manifest["version"] = 1
     (tmp_path / "manifest.json").write_text(json.dumps(manifest))
-    with pytest.raises(ValueError, match="expected data set version 3, got 1"):
+    with pytest.raises(ValueError, match="expected data set version 4, got 1"):
         dataset.load(tmp_path, "train")
 
 

@@ -3,10 +3,12 @@
 Per scene (one compressed NPZ chunk) and per target variant, every tile's 4 network layers ``(4, 9, 9)``
 (float16), its target disparity, and the ground truth (disparity at the tile centre, confidence, spread).
 Variants (network.md §6): ``heuristic`` - targets from the disparity engine (``tpnet_gpu.disparity``, as the
-pipeline runs it; tiles it cannot measure get ground truth + a random offset); ``random`` - ground truth + a uniform offset in
+pipeline runs it; tiles it cannot measure, ``measured`` False, get ground truth + a random offset); ``random`` - ground truth + a uniform offset in
 +-``random_offset`` px; ``near0``, ``near1``, ... (``near_draws`` of them) - ground truth + an offset of
 random sign and log-uniform size in ``near_offset`` px: the targets a second network pass starts from, which
-teach the precision near the answer. Scenes are split into train and test by scene. ``manifest.json`` lists
+teach the precision near the answer. Each chunk also keeps the scene's raw frames ``raws (cams, H, W)`` uint16
+(``black_level`` included) and the window surfaces ``gt_surfaces (ty, tx, K, 3)``, so training and evaluation
+can re-measure at new targets (a network's own earlier pass) and score either-surface. Scenes are split into train and test by scene. ``manifest.json`` lists
 the chunks. Frames are scaled as the engine scales them (``DisparityEngine.normalise``) before the layers are
 made, so training sees what the pipeline feeds the network.
 """
@@ -24,7 +26,7 @@ from tpnet_gpu.config import DatasetSpec  # noqa: F401 - DatasetSpec re-exported
 from tpnet_gpu.scenes import Sensor, random_scene, render
 
 FORMAT = "tpnet-dataset"
-VERSION = 3  # 3: heuristic targets from the disparity engine, frames scaled as the engine scales them
+VERSION = 4  # 4: + the raw frames, the engine's measured mask and the window surfaces (re-measuring at new targets)
 
 
 def _layers(processor, frames, target) -> np.ndarray:
@@ -46,15 +48,18 @@ def build_scene(index: int, spec: DatasetSpec, engine, processor) -> dict:
     shape = gt.shape
     heuristic = engine.run(frames).disparity.cpu().numpy().astype(np.float64)
     frames = engine.normalise(frames)
+    measured = np.isfinite(heuristic)
     fallback = gt + rng.uniform(-spec.random_offset, spec.random_offset, shape)
-    heuristic = np.where(np.isfinite(heuristic), heuristic, fallback)
+    heuristic = np.where(measured, heuristic, fallback)
     targets = {"heuristic": heuristic, "random": gt + rng.uniform(-spec.random_offset, spec.random_offset, shape)}
     low, high = np.log(spec.near_offset[0]), np.log(spec.near_offset[1])
     for i in range(spec.near_draws):
         size = np.exp(rng.uniform(low, high, shape))
         targets[f"near{i}"] = gt + np.where(rng.random(shape) < 0.5, -size, size)
     out = {"gt_disparity": gt.astype(np.float32), "gt_confidence": rendered.tile_confidence,
-           "gt_spread": rendered.tile_spread, "scene": np.int32(index)}
+           "gt_spread": rendered.tile_spread, "gt_surfaces": rendered.tile_surfaces.astype(np.float32),
+           "measured": measured, "raws": rendered.raws, "black_level": np.int32(rendered.sensor.black_level),
+           "scene": np.int32(index)}
     for name, target in targets.items():
         out[f"target_{name}"] = target.astype(np.float32)
         out[f"layers_{name}"] = _layers(processor, frames, target)
