@@ -26,8 +26,9 @@ PARTIAL_WEIGHTS = (2.0, 0.5, 0.2)
 LR_STEPS = ((0.0, 3e-4), (0.15, 1e-4), (0.3, 3e-5), (0.6, 1e-5), (0.9, 3e-6))  # (fraction of epochs, lr), §7
 
 
-def learning_rate(epoch: int, epochs: int) -> float:
-    frac = epoch / max(epochs, 1)
+def learning_rate(epoch: int, epochs: int, start: float = 0.0) -> float:
+    """The rate of ``epoch`` of ``epochs``: ``LR_STEPS`` scaled to the run, entered at fraction ``start``."""
+    frac = start + (1.0 - start) * epoch / max(epochs, 1)
     return [lr for start, lr in LR_STEPS if frac >= start][-1]
 
 
@@ -140,7 +141,12 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
     test_samples = frame_samples(dataset.load(data_folder, "test"), ("heuristic",), device)
     if not train_samples:
         raise ValueError(f"{data_folder}: the data set has no training scenes")
-    model = TPNet().to(device)
+    model = TPNet()
+    if config.init is not None:  # fine-tuning: start from these weights (a checkpoint still takes precedence)
+        if not Path(config.init).exists():
+            raise FileNotFoundError(f"init: {config.init}: no weights there")
+        model.load_state_dict(torch.load(config.init, map_location="cpu", weights_only=True))
+    model = model.to(device)
     optimiser = torch.optim.Adam(model.parameters(), lr=LR_STEPS[0][1])
     start_epoch, history = 0, []
     checkpoint = Path(checkpoint) if checkpoint else None
@@ -157,7 +163,7 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
     bar = tqdm(range(start_epoch, last), desc="epochs", disable=not progress)
     for epoch in bar:
         for group in optimiser.param_groups:
-            group["lr"] = learning_rate(epoch, config.epochs)
+            group["lr"] = learning_rate(epoch, config.epochs, config.lr_from)
         order = rng.permutation(len(train_samples))
         total = 0.0
         for first in range(0, len(order), config.batch):
@@ -169,7 +175,7 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
             loss.backward()
             optimiser.step()
             total += float(loss.detach()) * len(batch)
-        record = {"epoch": epoch + 1, "loss": total / len(order), "lr": learning_rate(epoch, config.epochs),
+        record = {"epoch": epoch + 1, "loss": total / len(order), "lr": learning_rate(epoch, config.epochs, config.lr_from),
                   **{f"test_{k}": v for k, v in evaluate(model, test_samples).items()}}
         history.append(record)
         bar.set_postfix(loss=f"{record['loss']:.4f}", rmse=f"{record['test_rmse_network']:.4f}")
@@ -181,9 +187,13 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
     recipe = {"command": f"tpnet dataset {data_folder} --scenes {manifest['spec']['scenes']} && "
                          f"tpnet train {data_folder} --epochs {config.epochs} --batch {config.batch} --seed {config.seed} "
                          f"--error-scale {config.error_scale or 0} --random-weight "
-                         f"{dict(zip(config.variants, config.variant_weights)).get('random', 1.0)}",
+                         f"{dict(zip(config.variants, config.variant_weights)).get('random', 1.0)}"
+                         + (f" --init {config.init} --lr-from {config.lr_from}" if config.init else ""),
               "config": asdict(config), "data": str(data_folder), "dataset_spec": manifest["spec"],
               "history": history}
+    if config.init is not None:  # the recipe of the weights this run started from, so the chain is on record
+        init_recipe = Path(config.init).with_suffix(".json")
+        recipe["init_recipe"] = json.loads(init_recipe.read_text()) if init_recipe.exists() else None
     save_weights(model, out_path, recipe)
     return {"history": history}
 

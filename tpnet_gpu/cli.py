@@ -158,7 +158,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     torch.set_num_threads(args.threads)
     config = TrainConfig(epochs=args.epochs, batch=args.batch, seed=args.seed, w_mode=args.w_mode,
                          error_scale=args.error_scale or None,
-                         variant_weights=tuple(args.random_weight if v == "random" else 1.0 for v in TrainConfig.variants))
+                         variant_weights=tuple(args.random_weight if v == "random" else 1.0 for v in TrainConfig.variants),
+                         init=args.init, lr_from=args.lr_from)
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
     result = train(args.data, args.out, config, checkpoint=args.checkpoint, device=device)
     last = result["history"][-1]
@@ -266,6 +267,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="c (px): errors are scaled by c / (|target - gt| + c); 0: plain errors, as the original")
     tr.add_argument("--random-weight", type=float, default=1.0,
                     help="loss weight of the random-offset (+-2 px) targets relative to the others")
+    tr.add_argument("--init", default=None, metavar="WEIGHTS",
+                    help="fine-tune: start from these weights (e.g. the shipped ones) instead of fresh ones")
+    tr.add_argument("--lr-from", type=float, default=train.lr_from,
+                    help="fraction of the learning-rate schedule the run starts at (fine-tuning: 0.3, from 3e-5)")
     tr.set_defaults(func=_cmd_train)
 
     bench = sub.add_parser("bench", help="run a benchmark of tpnet_gpu.bench (table + JSON)",

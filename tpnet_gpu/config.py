@@ -158,8 +158,14 @@ class TrainConfig:
     # loss asks for an error proportional to the target's, so both coarse corrections and the precision near
     # the answer count, and repeated passes converge
     error_scale: float | None = 0.3
+    # fine-tuning: the weights the run starts from (None: fresh Xavier weights) and the fraction of the LR
+    # schedule it starts at (0.3: from 3e-5, below the rate that would undo what the weights learnt)
+    init: str | None = None
+    lr_from: float = 0.0
 
     def __post_init__(self):
+        if not 0.0 <= self.lr_from < 1.0:
+            raise ValueError(f"lr_from: expected a schedule fraction in [0, 1), got {self.lr_from!r}")
         if len(self.variant_weights) != len(self.variants):
             raise ValueError(f"variant_weights: expected one weight per variant {self.variants}, "
                              f"got {self.variant_weights}")

@@ -72,3 +72,24 @@ def test_error_scale_hand_case(error_scale):
     if error_scale is not None:  # 0 -> 0, 0.1 -> 0.1*0.75, 0.5 -> 0.5*0.375, -1.5 -> -1.5*0.1667
         errors = errors * error_scale / (errors.abs() + error_scale)
     assert loss == pytest.approx(float(torch.mean(errors**2)), rel=1e-5)
+
+
+def test_fine_tuning_starts_from_the_given_weights(data, tmp_path):
+    """A run with ``init`` and no epochs writes the init weights back bit for bit (oracle: the file it started
+    from); its recipe names them and carries their recipe; the schedule is entered at ``lr_from``."""
+    train(data, tmp_path / "base.pt", TrainConfig(epochs=2, batch=2), progress=False, log=lambda m: None)
+    config = TrainConfig(epochs=3, batch=2, init=str(tmp_path / "base.pt"), lr_from=0.3)
+    train(data, tmp_path / "tuned.pt", config, progress=False, stop_after=0, log=lambda m: None)
+    base, tuned = torch.load(tmp_path / "base.pt"), torch.load(tmp_path / "tuned.pt")
+    for key in base:
+        torch.testing.assert_close(tuned[key], base[key], rtol=0, atol=0)
+    import json
+
+    recipe = json.loads((tmp_path / "tuned.json").read_text())
+    assert "--init" in recipe["command"] and recipe["init_recipe"]["config"]["epochs"] == 2
+    history = train(data, tmp_path / "t2.pt", config, progress=False, log=lambda m: None)["history"]
+    assert [h["lr"] for h in history] == [3e-5, 3e-5, 1e-5]  # fractions 0.3, 0.53, 0.77 of LR_STEPS
+    with pytest.raises(FileNotFoundError, match="init"):
+        train(data, tmp_path / "x.pt", TrainConfig(epochs=1, init=str(tmp_path / "none.pt")), progress=False)
+    with pytest.raises(ValueError, match="lr_from"):
+        TrainConfig(lr_from=1.0)
