@@ -66,6 +66,31 @@ def frame_samples(chunks: list[dict], variants, device="cpu") -> list[dict]:
     return samples
 
 
+def refresh_passes(model: TPNet, samples: list[dict], chunks: list[dict], measure, targets=None) -> list:
+    """The "pass" samples: per chunk, the model's prediction from its heuristic sample (or the given ``targets``,
+    a resumed run's), with layers re-measured there by ``measure(chunk, target) -> (ty, tx, 4, 9, 9)``.
+    Returns the targets ``(ty, tx)`` float32 per chunk (a checkpoint keeps them)."""
+    heuristic = {s["scene"]: s for s in samples if s["variant"] == "heuristic"}
+    new_targets = []
+    for i, chunk in enumerate(chunks):
+        h = heuristic[int(chunk["scene"])]
+        if targets is None:
+            with torch.no_grad():
+                t = (h["target"] + model.forward_frame(h["layers"], h["target"])).cpu().numpy()
+        else:
+            t = targets[i]
+        layers = measure(chunk, t)
+        sample = {**h, "variant": "pass", "target": torch.from_numpy(np.nan_to_num(t)).to(h["target"].device),
+                  "layers": torch.from_numpy(np.nan_to_num(layers.astype(np.float32))).to(h["layers"].device)}
+        passes = [j for j, s in enumerate(samples) if s["variant"] == "pass" and s["scene"] == h["scene"]]
+        if passes:
+            samples[passes[0]] = sample
+        else:
+            samples.append(sample)
+        new_targets.append(t.astype(np.float32))
+    return new_targets
+
+
 def _tile_weights(sample: dict, config: TrainConfig) -> torch.Tensor:
     """Per-tile extra weight: 0 off-target (|t - g| > max_offset) or on the frame border; hard/easy balanced."""
     usable = (sample["target"] - sample["gt"]).abs() <= config.max_offset
@@ -137,7 +162,8 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
     from tpnet_gpu import dataset  # noqa: PLC0415
 
     torch.manual_seed(config.seed)
-    train_samples = frame_samples(dataset.load(data_folder, "train"), config.variants, device)
+    train_chunks = dataset.load(data_folder, "train")
+    train_samples = frame_samples(train_chunks, config.variants, device)
     test_samples = frame_samples(dataset.load(data_folder, "test"), ("heuristic",), device)
     if not train_samples:
         raise ValueError(f"{data_folder}: the data set has no training scenes")
@@ -148,28 +174,40 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
         model.load_state_dict(torch.load(config.init, map_location="cpu", weights_only=True))
     model = model.to(device)
     optimiser = torch.optim.Adam(model.parameters(), lr=LR_STEPS[0][1])
-    start_epoch, history = 0, []
+    start_epoch, history, pass_targets = 0, [], None
     checkpoint = Path(checkpoint) if checkpoint else None
     if checkpoint is not None and checkpoint.exists():
         state = torch.load(checkpoint, weights_only=False, map_location=device)
         model.load_state_dict(state["model"])
         optimiser.load_state_dict(state["optimiser"])
         start_epoch, history = state["epoch"], state["history"]
+        pass_targets = state.get("pass_targets")
         log(f"resumed from {checkpoint} at epoch {start_epoch}")
+    measure = None
+    n_samples = len(train_samples) + (len(train_chunks) if config.pass_every is not None else 0)
+    if config.pass_every is not None:
+        spec = dataset.DatasetSpec(**{k: tuple(v) if isinstance(v, list) else v
+                                      for k, v in json.loads((Path(data_folder) / "manifest.json").read_text())["spec"].items()})
+        engine, processor = dataset.measurers(spec, device)
+        measure = lambda chunk, t: dataset.remeasure(chunk, t, engine, processor)  # noqa: E731
+        if pass_targets is not None:  # resumed between refreshes: the same pass samples as the unbroken run
+            refresh_passes(model, train_samples, train_chunks, measure, pass_targets)
     rng = np.random.default_rng(config.seed)
     for _ in range(start_epoch):  # replay the shuffles so a resumed run is identical to an unbroken one
-        rng.permutation(len(train_samples))
+        rng.permutation(n_samples)
     last = config.epochs if stop_after is None else min(stop_after, config.epochs)
     bar = tqdm(range(start_epoch, last), desc="epochs", disable=not progress)
     for epoch in bar:
         for group in optimiser.param_groups:
             group["lr"] = learning_rate(epoch, config.epochs, config.lr_from)
+        if measure is not None and epoch % config.pass_every == 0:
+            pass_targets = refresh_passes(model, train_samples, train_chunks, measure)
         order = rng.permutation(len(train_samples))
         total = 0.0
         for first in range(0, len(order), config.batch):
             optimiser.zero_grad()
             batch = [train_samples[i] for i in order[first : first + config.batch]]
-            weights = dict(zip(config.variants, config.variant_weights))
+            weights = {**dict(zip(config.variants, config.variant_weights)), "pass": 1.0}
             loss = sum(weights[s["variant"]] * sample_loss(model, s, config) for s in batch) / len(batch)
             loss = loss + config.weights_lambda * weights_loss(model.stage1[0].weight, mode=config.w_mode)
             loss.backward()
@@ -182,13 +220,14 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
         if checkpoint is not None:
             checkpoint.parent.mkdir(parents=True, exist_ok=True)
             torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch + 1,
-                        "history": history, "config": asdict(config)}, checkpoint)
+                        "history": history, "config": asdict(config), "pass_targets": pass_targets}, checkpoint)
     manifest = json.loads((Path(data_folder) / "manifest.json").read_text())
     recipe = {"command": f"tpnet dataset {data_folder} --scenes {manifest['spec']['scenes']} && "
                          f"tpnet train {data_folder} --epochs {config.epochs} --batch {config.batch} --seed {config.seed} "
                          f"--error-scale {config.error_scale or 0} --random-weight "
                          f"{dict(zip(config.variants, config.variant_weights)).get('random', 1.0)}"
-                         + (f" --init {config.init} --lr-from {config.lr_from}" if config.init else ""),
+                         + (f" --init {config.init} --lr-from {config.lr_from}" if config.init else "")
+                         + (f" --pass-every {config.pass_every}" if config.pass_every else ""),
               "config": asdict(config), "data": str(data_folder), "dataset_spec": manifest["spec"],
               "history": history}
     if config.init is not None:  # the recipe of the weights this run started from, so the chain is on record

@@ -60,14 +60,11 @@ def test_build_resumes_and_rebuilds_identically(built, tmp_path):
 def test_stored_raws_re_measure_to_the_stored_layers(built):
     """The chunk's raw frames are the scene's (oracle: re-measuring them at the stored targets gives the stored
     layers bit for bit), and ``measured`` marks the engine's tiles (unmeasured ones are ground truth + <= 2 px)."""
-    from tpnet_gpu.disparity import DisparityEngine
-
     chunk = dataset.load(built, "train")[0]
     assert chunk["raws"].shape == (4, SPEC.height, SPEC.width) and chunk["raws"].dtype == np.uint16
     assert chunk["gt_surfaces"].shape[:2] == chunk["gt_disparity"].shape
-    engine = DisparityEngine(SPEC.height, SPEC.width, device="cpu")
-    frames = engine.normalise(chunk["raws"].astype(np.float32) - chunk["black_level"])
-    layers = dataset._layers(engine.tp, frames, chunk["target_near0"])
+    engine, processor = dataset.measurers(SPEC, "cpu")
+    layers = dataset.remeasure(chunk, chunk["target_near0"], engine, processor)
     np.testing.assert_array_equal(layers, chunk["layers_near0"])
     measured = chunk["measured"]
     assert measured.dtype == bool and measured.any()

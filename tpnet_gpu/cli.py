@@ -159,7 +159,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     config = TrainConfig(epochs=args.epochs, batch=args.batch, seed=args.seed, w_mode=args.w_mode,
                          error_scale=args.error_scale or None,
                          variant_weights=tuple(args.random_weight if v == "random" else 1.0 for v in TrainConfig.variants),
-                         init=args.init, lr_from=args.lr_from)
+                         init=args.init, lr_from=args.lr_from, pass_every=args.pass_every)
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
     result = train(args.data, args.out, config, checkpoint=args.checkpoint, device=device)
     last = result["history"][-1]
@@ -271,6 +271,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="fine-tune: start from these weights (e.g. the shipped ones) instead of fresh ones")
     tr.add_argument("--lr-from", type=float, default=train.lr_from,
                     help="fraction of the learning-rate schedule the run starts at (fine-tuning: 0.3, from 3e-5)")
+    tr.add_argument("--pass-every", type=int, default=train.pass_every, metavar="EPOCHS",
+                    help="train on the network's own pass too: its prediction from the heuristic targets, re-measured "
+                         "from the scenes' raw frames every EPOCHS epochs (a second pass converges instead of drifting)")
     tr.set_defaults(func=_cmd_train)
 
     bench = sub.add_parser("bench", help="run a benchmark of tpnet_gpu.bench (table + JSON)",

@@ -162,8 +162,15 @@ class TrainConfig:
     # schedule it starts at (0.3: from 3e-5, below the rate that would undo what the weights learnt)
     init: str | None = None
     lr_from: float = 0.0
+    # the network's own pass (network.md §6): every ``pass_every`` epochs each training scene gets a "pass" sample,
+    # the model's prediction from its heuristic targets with the layers re-measured there from the scene's raw
+    # frames, so a second pass learns to converge instead of drifting (None: no such samples)
+    pass_every: int | None = None
 
     def __post_init__(self):
+        if self.pass_every is not None and (isinstance(self.pass_every, bool) or not isinstance(self.pass_every, int)
+                                            or self.pass_every < 1):
+            raise ValueError(f"pass_every: expected None or a positive number of epochs, got {self.pass_every!r}")
         if not 0.0 <= self.lr_from < 1.0:
             raise ValueError(f"lr_from: expected a schedule fraction in [0, 1), got {self.lr_from!r}")
         if len(self.variant_weights) != len(self.variants):

@@ -66,19 +66,35 @@ def build_scene(index: int, spec: DatasetSpec, engine, processor) -> dict:
     return out
 
 
+def measurers(spec: DatasetSpec, device: str | None = None):
+    """The ``DisparityEngine`` of the spec's size (heuristic targets, frame scaling) and the processor that makes
+    the network layers (the engine's own when it correlates as ``spec.correlation()``)."""
+    from tpnet_gpu.disparity import DisparityEngine  # noqa: PLC0415 - Warp starts on use
+    from tpnet_gpu.processor import TileProcessor  # noqa: PLC0415
+
+    engine = DisparityEngine(spec.height, spec.width, device=device)
+    processor = (engine.tp if spec.correlation().resolved(engine.tp.colours) == engine.tp.config else
+                 TileProcessor(spec.height, spec.width, config=spec.correlation(), device=device))
+    return engine, processor
+
+
+def remeasure(chunk: dict, target: np.ndarray, engine, processor) -> np.ndarray:
+    """Layers ``(ty, tx, 4, 9, 9)`` float16 of a chunk's scene re-measured at ``target (ty, tx)`` from its raw
+    frames, scaled and correlated as :func:`build_scene` made them (``engine``, ``processor``: :func:`measurers`)."""
+    if "raws" not in chunk:
+        raise ValueError("chunk: expected a version-4 chunk with raw frames ('raws'), got one without")
+    frames = engine.normalise(chunk["raws"].astype(np.float32) - chunk["black_level"])
+    return _layers(processor, frames, np.asarray(target, dtype=np.float32))
+
+
 def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = None, progress: bool = True) -> Path:
     """Build the data set into ``folder`` (one NPZ per scene + ``manifest.json``); resumes: chunks already
     present are kept."""
     from tqdm import tqdm  # noqa: PLC0415
 
-    from tpnet_gpu.disparity import DisparityEngine  # noqa: PLC0415 - Warp starts on use
-    from tpnet_gpu.processor import TileProcessor  # noqa: PLC0415
-
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    engine = DisparityEngine(spec.height, spec.width, device=device)
-    processor = (engine.tp if spec.correlation().resolved(engine.tp.colours) == engine.tp.config else
-                 TileProcessor(spec.height, spec.width, config=spec.correlation(), device=device))
+    engine, processor = measurers(spec, device)
     labels = spec.split()
     chunks = []
     for index in tqdm(range(spec.scenes), desc="scenes", disable=not progress):

@@ -29,10 +29,11 @@ def test_loss_falls_and_runs_are_deterministic(data, tmp_path):
     assert (tmp_path / "a.json").exists()
 
 
-def test_resume_equals_an_unbroken_run(data, tmp_path):
-    config = TrainConfig(epochs=4, batch=2)
+@pytest.mark.parametrize("pass_every,stop", [(None, 2), (2, 1)])  # (2, 1): resumed between two refreshes
+def test_resume_equals_an_unbroken_run(data, tmp_path, pass_every, stop):
+    config = TrainConfig(epochs=4, batch=2, pass_every=pass_every)
     train(data, tmp_path / "full.pt", config, progress=False)
-    train(data, tmp_path / "half.pt", config, checkpoint=tmp_path / "ck.pt", progress=False, stop_after=2)
+    train(data, tmp_path / "half.pt", config, checkpoint=tmp_path / "ck.pt", progress=False, stop_after=stop)
     train(data, tmp_path / "resumed.pt", config, checkpoint=tmp_path / "ck.pt", progress=False, log=lambda m: None)
     full = torch.load(tmp_path / "full.pt")
     resumed = torch.load(tmp_path / "resumed.pt")
@@ -93,3 +94,28 @@ def test_fine_tuning_starts_from_the_given_weights(data, tmp_path):
         train(data, tmp_path / "x.pt", TrainConfig(epochs=1, init=str(tmp_path / "none.pt")), progress=False)
     with pytest.raises(ValueError, match="lr_from"):
         TrainConfig(lr_from=1.0)
+
+
+def test_pass_samples_are_re_measured_at_the_models_output(data):
+    """With a network that predicts no residual, the "pass" sample sits at the heuristic targets, so its
+    re-measured layers must equal the heuristic layers the builder stored (oracle: the data set); a second
+    refresh replaces the samples instead of adding more."""
+    from tpnet_gpu.net.model import TPNet
+    from tpnet_gpu.net.train import frame_samples, refresh_passes
+
+    chunks = dataset.load(data, "train")
+    samples = frame_samples(chunks, ("heuristic", "random"))
+    model = TPNet()
+    torch.nn.init.zeros_(model.stage2[-1].weight)  # residual = bias = 0
+    engine, processor = dataset.measurers(SPEC, "cpu")
+    measure = lambda chunk, t: dataset.remeasure(chunk, t, engine, processor)  # noqa: E731
+    targets = refresh_passes(model, samples, chunks, measure)
+    refresh_passes(model, samples, chunks, measure)
+    passes = [s for s in samples if s["variant"] == "pass"]
+    assert len(passes) == len(chunks) == len(targets)
+    for chunk, sample, target in zip(chunks, passes, targets):
+        np.testing.assert_array_equal(target, chunk["target_heuristic"])
+        expected = np.nan_to_num(chunk["layers_heuristic"].astype(np.float32))
+        np.testing.assert_array_equal(sample["layers"].numpy(), expected)
+    with pytest.raises(ValueError, match="pass_every"):
+        TrainConfig(pass_every=0)
