@@ -170,7 +170,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 BACKEND_HELP = (f"tile-processor kernels (default: warp for frames of at most {SMALL_FRAME_PIXELS} pixels, whose "
                 "start-up dominates; else taichi on the CPU, warp on CUDA)")
-BENCHES = ("tp", "accuracy", "network", "throughput", "startup")
+BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:

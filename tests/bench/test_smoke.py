@@ -150,6 +150,23 @@ def test_bench_network(tmp_path, capsys):
     assert png is None or png.stat().st_size > 0
 
 
+def test_bench_network_limits(tmp_path, capsys):
+    from tpnet_gpu.bench import bench_network_limits as limits
+
+    argv = ["--scenes", "1", "--passes", "2", "--height", "64", "--width", "96"]
+    report, out, err = run_bench(limits, argv, tmp_path, capsys)
+    starts = report["starts"]
+    assert len(starts) == len(limits.FRACTIONS) + len(limits.NOISE_PX)
+    engine_start = starts["gt + 1 (engine - gt)"]["all"]
+    truth_start = starts["gt + 0 (engine - gt)"]["all"]
+    assert engine_start["tiles"] == truth_start["tiles"] > 0
+    assert truth_start["rmse_start"] == 0.0 and engine_start["rmse_start"] > 0  # physical: the truth has no error
+    assert report["passes_rmse"]["gt"]["all"][0] == 0.0 and len(report["passes_rmse"]["engine"]["all"]) == 3
+    for rows in report["budget"].values():
+        assert sum(r["sse_share"] for r in rows) == pytest.approx(1.0) or all(r["sse_share"] == 0 for r in rows)
+    assert report["table"][0] in out and "[bench_network_limits]" in err
+
+
 def test_every_bench_module_is_a_cli_choice():
     names = {m.name.removeprefix("bench_") for m in pkgutil.iter_modules(tpnet_gpu.bench.__path__)
              if m.name.startswith("bench_")}
