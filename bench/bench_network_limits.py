@@ -12,6 +12,9 @@ measures within 1 px of the ground truth (its inliers), per class (tpnet_gpu/eva
   the start and of one network pass, and their ratio;
 * **passes**: RMSE after 1..``--passes`` passes from the engine's start and from the truth (each pass
   re-measured at the previous pass's output): a network that converges keeps or lowers it;
+* **sensor noise**: the same scenes rendered again without photon and read noise: engine and one network pass
+  on each, scored on the tiles both engines get within 1 px - what is left without noise is the measurement's
+  own bias (window, texture, sampling), which more precise starts cannot remove;
 * **error budget**: flat tiles from the engine's start, binned by the layers' peak (the mean over the 4
   layers of each layer's maximum, a strength measure) and by disparity: each bin's share of the tiles, its
   engine and network RMSE, and its share of the network's squared error.
@@ -92,6 +95,7 @@ def main(argv=None) -> dict:
     errors = {name: {c: [] for c in CLASSES} for name in starts}  # (start, net) error pairs per class
     chains = {"engine": {c: [] for c in CLASSES}, "gt": {c: [] for c in CLASSES}}  # errors over passes
     flat_rows = []  # (engine err, net err, peak, disparity) of flat tiles from the engine's start
+    noise_pairs = {c: [] for c in CLASSES}  # (engine, net) errors with noise, then without
     for index in range(args.scenes):
         rng = np.random.default_rng([args.seed, index])
         rendered = render(random_scene(rig, rng), rig, sensor=Sensor(), supersample=2, seed=args.seed + index)
@@ -117,6 +121,19 @@ def main(argv=None) -> dict:
                 peak = layers.amax(dim=(-2, -1)).mean(dim=-1).cpu().numpy().reshape(gt.shape)
                 sel = classes["flat"]
                 flat_rows.append(np.stack([(found - gt)[sel], (net - gt)[sel], peak[sel], gt[sel]]))
+        clean = render(random_scene(rig, np.random.default_rng([args.seed, index])), rig, sensor=Sensor(),
+                       supersample=2, seed=args.seed + index, noise=False)
+        clean_frames = clean.raws.astype(np.float32) - clean.sensor.black_level
+        found_clean = engine.run(clean_frames).disparity.cpu().numpy().astype(np.float64)
+        if tp is not engine.tp:
+            tp.load(engine.normalise(clean_frames))
+        net_clean = one_pass(np.where(np.isfinite(found_clean), found_clean, gt))[0]
+        both = inliers & np.isfinite(found_clean) & (np.abs(found_clean - gt) <= 1.0)
+        tp.load(engine.normalise(frames))  # the noisy frames again, for the passes below
+        net_noisy = one_pass(found)[0]
+        for c in CLASSES:
+            sel = classes[c] & both
+            noise_pairs[c].append(np.stack([(e - gt)[sel] for e in (found, net_noisy, found_clean, net_clean)]))
         for chain, start in (("engine", found), ("gt", gt)):
             estimates = [start]
             for _ in range(args.passes):
@@ -135,6 +152,7 @@ def main(argv=None) -> dict:
                                    "ratio_to_engine": None if not engine_rmse or e.size == 0 else _rmse(e[1]) / engine_rmse}
     pass_rows = {chain: {c: [_rmse(x) for x in np.concatenate(v, axis=1)] for c, v in per.items()}
                  for chain, per in chains.items()}
+    noise_rows = {c: [_rmse(x) for x in np.concatenate(v, axis=1)] for c, v in noise_pairs.items()}
     flat = np.concatenate(flat_rows, axis=1)
     budget = {"peak": _budget(flat[:2], flat[2], PEAK_BINS), "disparity": _budget(flat[:2], flat[3], DISPARITY_BINS)}
 
@@ -147,6 +165,8 @@ def main(argv=None) -> dict:
     lines += common.format_table(["passes from", *(f"{c}: start, 1..{args.passes}" for c in CLASSES)],
                                  [[chain, *(" ".join(_f(x) for x in pass_rows[chain][c]) for c in CLASSES)]
                                   for chain in chains])
+    lines += common.format_table(["class (tiles both engines get)", "engine", "net", "engine, no noise", "net, no noise"],
+                                 [[c, *(_f(x) for x in noise_rows[c])] for c in CLASSES])
     for key, rows in budget.items():
         lines += common.format_table([f"flat, {key} bin", "tiles", "engine rmse", "net rmse", "share of net SSE"],
                                      [[f"[{r['low']:g}, {r['high']:g})", f"{100 * r['share']:.0f} %", _f(r["rmse_engine"]),
@@ -154,7 +174,7 @@ def main(argv=None) -> dict:
     print("\n".join(lines))
     report = {"bench": "network_limits", "scenes": args.scenes, "width": args.width, "height": args.height,
               "seed": args.seed, "passes": args.passes, "machine": platform.platform(), "starts": start_rows,
-              "passes_rmse": pass_rows, "budget": budget, "table": lines}
+              "passes_rmse": pass_rows, "noise_free": noise_rows, "budget": budget, "table": lines}
     if args.json:
         common.save_json(report, args.json)
     return report

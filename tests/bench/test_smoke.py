@@ -162,6 +162,7 @@ def test_bench_network_limits(tmp_path, capsys):
     assert engine_start["tiles"] == truth_start["tiles"] > 0
     assert truth_start["rmse_start"] == 0.0 and engine_start["rmse_start"] > 0  # physical: the truth has no error
     assert report["passes_rmse"]["gt"]["all"][0] == 0.0 and len(report["passes_rmse"]["engine"]["all"]) == 3
+    assert len(report["noise_free"]["all"]) == 4
     for rows in report["budget"].values():
         assert sum(r["sse_share"] for r in rows) == pytest.approx(1.0) or all(r["sse_share"] == 0 for r in rows)
     assert report["table"][0] in out and "[bench_network_limits]" in err
