@@ -98,7 +98,8 @@ def main(argv=None) -> dict:
     noise_pairs = {c: [] for c in CLASSES}  # (engine, net) errors with noise, then without
     for index in range(args.scenes):
         rng = np.random.default_rng([args.seed, index])
-        rendered = render(random_scene(rig, rng), rig, sensor=Sensor(), supersample=2, seed=args.seed + index)
+        scene = random_scene(rig, rng)
+        rendered = render(scene, rig, sensor=Sensor(), supersample=2, seed=args.seed + index)
         frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
         gt = rendered.tile_disparity.astype(np.float64)
         found = engine.run(frames).disparity.cpu().numpy().astype(np.float64)
@@ -117,12 +118,12 @@ def main(argv=None) -> dict:
             net, layers = one_pass(start)
             for c in CLASSES:
                 errors[name][c].append(np.stack([(start - gt)[classes[c]], (net - gt)[classes[c]]]))
-            if name == starts[0]:
+            if name == starts[0]:  # the engine's own start: kept for the noise rows and the passes
+                net_engine = net
                 peak = layers.amax(dim=(-2, -1)).mean(dim=-1).cpu().numpy().reshape(gt.shape)
                 sel = classes["flat"]
                 flat_rows.append(np.stack([(found - gt)[sel], (net - gt)[sel], peak[sel], gt[sel]]))
-        clean = render(random_scene(rig, np.random.default_rng([args.seed, index])), rig, sensor=Sensor(),
-                       supersample=2, seed=args.seed + index, noise=False)
+        clean = render(scene, rig, sensor=Sensor(), supersample=2, seed=args.seed + index, noise=False)
         clean_frames = clean.raws.astype(np.float32) - clean.sensor.black_level
         found_clean = engine.run(clean_frames).disparity.cpu().numpy().astype(np.float64)
         if tp is not engine.tp:
@@ -130,13 +131,11 @@ def main(argv=None) -> dict:
         net_clean = one_pass(np.where(np.isfinite(found_clean), found_clean, gt))[0]
         both = inliers & np.isfinite(found_clean) & (np.abs(found_clean - gt) <= 1.0)
         tp.load(engine.normalise(frames))  # the noisy frames again, for the passes below
-        net_noisy = one_pass(found)[0]
         for c in CLASSES:
             sel = classes[c] & both
-            noise_pairs[c].append(np.stack([(e - gt)[sel] for e in (found, net_noisy, found_clean, net_clean)]))
-        for chain, start in (("engine", found), ("gt", gt)):
-            estimates = [start]
-            for _ in range(args.passes):
+            noise_pairs[c].append(np.stack([(e - gt)[sel] for e in (found, net_engine, found_clean, net_clean)]))
+        for chain, estimates in (("engine", [found, net_engine]), ("gt", [gt])):
+            while len(estimates) <= args.passes:
                 estimates.append(one_pass(estimates[-1])[0])
             for c in CLASSES:
                 chains[chain][c].append(np.stack([(e - gt)[classes[c]] for e in estimates]))

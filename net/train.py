@@ -71,7 +71,7 @@ def refresh_passes(model: TPNet, samples: list[dict], chunks: list[dict], measur
     a resumed run's), with layers re-measured there by ``measure(chunk, target) -> (ty, tx, 4, 9, 9)``.
     Returns the targets ``(ty, tx)`` float32 per chunk (a checkpoint keeps them)."""
     heuristic = {s["scene"]: s for s in samples if s["variant"] == "heuristic"}
-    new_targets = []
+    new_samples, new_targets = [], []
     for i, chunk in enumerate(chunks):
         h = heuristic[int(chunk["scene"])]
         if targets is None:
@@ -82,12 +82,9 @@ def refresh_passes(model: TPNet, samples: list[dict], chunks: list[dict], measur
         layers = measure(chunk, t)
         sample = {**h, "variant": "pass", "target": torch.from_numpy(np.nan_to_num(t)).to(h["target"].device),
                   "layers": torch.from_numpy(np.nan_to_num(layers.astype(np.float32))).to(h["layers"].device)}
-        passes = [j for j, s in enumerate(samples) if s["variant"] == "pass" and s["scene"] == h["scene"]]
-        if passes:
-            samples[passes[0]] = sample
-        else:
-            samples.append(sample)
+        new_samples.append(sample)
         new_targets.append(t.astype(np.float32))
+    samples[:] = [s for s in samples if s["variant"] != "pass"] + new_samples  # replaced, in chunk order, last
     return new_targets
 
 
@@ -162,6 +159,7 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
     from tpnet_gpu import dataset  # noqa: PLC0415
 
     torch.manual_seed(config.seed)
+    manifest = json.loads((Path(data_folder) / "manifest.json").read_text())
     train_chunks = dataset.load(data_folder, "train")
     train_samples = frame_samples(train_chunks, config.variants, device)
     test_samples = frame_samples(dataset.load(data_folder, "test"), ("heuristic",), device)
@@ -186,8 +184,7 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
     measure = None
     n_samples = len(train_samples) + (len(train_chunks) if config.pass_every is not None else 0)
     if config.pass_every is not None:
-        spec = dataset.DatasetSpec(**{k: tuple(v) if isinstance(v, list) else v
-                                      for k, v in json.loads((Path(data_folder) / "manifest.json").read_text())["spec"].items()})
+        spec = dataset.DatasetSpec(**{k: tuple(v) if isinstance(v, list) else v for k, v in manifest["spec"].items()})
         engine, processor = dataset.measurers(spec, device)
         measure = lambda chunk, t: dataset.remeasure(chunk, t, engine, processor)  # noqa: E731
         if pass_targets is not None:  # resumed between refreshes: the same pass samples as the unbroken run
@@ -221,7 +218,6 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
             checkpoint.parent.mkdir(parents=True, exist_ok=True)
             torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch + 1,
                         "history": history, "config": asdict(config), "pass_targets": pass_targets}, checkpoint)
-    manifest = json.loads((Path(data_folder) / "manifest.json").read_text())
     recipe = {"command": f"tpnet dataset {data_folder} --scenes {manifest['spec']['scenes']} && "
                          f"tpnet train {data_folder} --epochs {config.epochs} --batch {config.batch} --seed {config.seed} "
                          f"--error-scale {config.error_scale or 0} --random-weight "
