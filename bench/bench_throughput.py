@@ -95,16 +95,10 @@ def network_stage1(net: net_model.TPNet, layers: torch.Tensor, target: torch.Ten
     return net_model.stage1_features(net_model.tile_inputs(layers, target), _params(net)[0])
 
 
-def network_stage2(net: net_model.TPNet, features: torch.Tensor) -> torch.Tensor:
+def network_stage2(net: net_model.TPNet, features: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """Residuals ``(ty, tx)`` from stage-1 features: the second half of ``model.frame_residual`` (clone 0, all tiles
-    active): 5x5 convolution over replicate-padded features, then the per-tile rest of stage 2."""
-    stage2 = _params(net)[1]
-    padded = F.pad(features.permute(2, 0, 1).unsqueeze(0), (net_model.CLUSTER_RADIUS,) * 4, mode="replicate")
-    kernel, bias = net_model.stage2_conv(stage2[0], (0,))  # (hidden, F, 5, 5): clone 0's masked kernels
-    z = F.conv2d(padded, kernel, bias)[0].permute(1, 2, 0)  # (ty, tx, hidden)
-    if len(stage2) == 1:
-        return z.squeeze(-1)
-    return net_model.stage2_output(F.leaky_relu(z, net_model.NEGATIVE_SLOPE), stage2[1:])
+    active), by the model's own ``frame_stage2``."""
+    return net_model.frame_stage2(features, target, _params(net)[1], (0,))[..., 0]
 
 
 # --- the three implementations ----------------------------------------------------------------------------------
@@ -143,7 +137,7 @@ def run_warp(args, cfa, device, frames_t, target, net) -> dict:
         state["features"] = network_stage1(net, layers, target)
 
     def stage2() -> None:
-        state["residual"] = network_stage2(net, state["features"])
+        state["residual"] = network_stage2(net, state["features"], target)
 
     def network() -> None:
         state["residual"] = net.forward_frame(layers, target)
@@ -166,7 +160,7 @@ def run_warp(args, cfa, device, frames_t, target, net) -> dict:
     with torch.inference_mode():
         warmup, runs = run_stages("warp", stages, sync, args.repeat)
         # The timed network split is the same computation as forward_frame: checked on this frame.
-        split = network_stage2(net, network_stage1(net, layers, target))
+        split = network_stage2(net, network_stage1(net, layers, target), target)
         split_diff = float((split - net.forward_frame(layers, target)).abs().max())
     outputs = {name: getattr(result, name).clone() for name in ("clt", "corr", "layers", "centres")}
     return {"warmup": warmup, "runs": runs, "outputs": {**outputs, "split_diff": split_diff, "config": tp.config,

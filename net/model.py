@@ -1,21 +1,24 @@
 """TPNET: the two-stage disparity network (network.md §1-4, §8), as a functional core plus ``TPNet``.
 
 Stage 1 (per tile, shared by every tile) maps the tile's 4 correlation layers and its target disparity
-(325 values) to 32 features; stage 2 combines the features of a 5x5 tile cluster (800 values) into the
-**residual** disparity of the centre tile (predicted disparity = target + residual). Two equivalent forms
-use the same parameters:
+(325 values) to 32 features; stage 2 combines the features of a 5x5 tile cluster and the cluster's targets
+relative to the centre's (800 + 25 values) into the **residual** disparity of the centre tile (predicted
+disparity = target + residual). Two equivalent forms use the same parameters:
 
 * cluster form (training batches): ``(B, 25, 325) -> (B, 3)``, one output per stage-2 clone (§4);
 * whole-frame form (inference, dense training): stage 1 as a matmul over all tiles (a 1x1 convolution),
-  stage 2's first layer as a 5x5 convolution over replicate-padded stage-1 features, the rest per tile.
+  stage 2's first layer as a 5x5 convolution over replicate-padded stage-1 features plus a matmul over each
+  tile's 25 relative targets, the rest per tile.
 
 Convention:
     * Correlation layers are ordered ``[hor, vert, diag-main, diag-other]``; each is 9x9 (row = vertical
       shift, col = horizontal shift, -4..+4 px). A tile's input is the layers flattened layer-major then
       row-major (``layer*81 + row*9 + col``), then the target disparity: 325 values. NaN inputs become 0.
     * Cluster position ``k = (dy+2)*5 + (dx+2)`` (row-major, centre ``k = 12``); stage 2's input is
-      ``[k*32 + c]``. The equivalent 5x5 kernel is ``kernel[o, c, dy+2, dx+2] = W[o, k*32 + c]``
-      (``nn.Linear`` stores ``W`` as ``(out, in)``).
+      ``[k*32 + c]`` then ``[800 + k]`` = clip(target_k - target_centre, +-2 px), 0 where either target is NaN
+      (or, in the frame form, the neighbour inactive); weights of the older layout without these inputs load
+      with zero columns there (the same outputs). The equivalent 5x5 kernel is
+      ``kernel[o, c, dy+2, dx+2] = W[o, k*32 + c]`` (``nn.Linear`` stores ``W`` as ``(out, in)``).
     * Clones: 0 = all 5x5 positions, 1 = inner 3x3, 2 = centre only; positions outside a clone's square
       feed zero features to the shared stage 2.
     * Frame edges replicate the edge tiles' stage-1 features (= cluster indices clipped to the frame);
@@ -32,12 +35,14 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from tpnet_gpu.net.checks import check_like, check_tensor, clone_list, frame_grid
+from tpnet_gpu.net.neighbours import CLUSTER_RADIUS, frame_relative_targets, relative_targets
+
 CORR_LAYERS = 4  # hor, vert, diag-main, diag-other
 CORR_SIZE = 9  # 9x9 crop per layer
 CORR_INPUTS = CORR_LAYERS * CORR_SIZE * CORR_SIZE  # 324
 TILE_INPUTS = CORR_INPUTS + 1  # + target disparity = 325
-CLUSTER_SIDE = 5
-CLUSTER_RADIUS = CLUSTER_SIDE // 2  # 2
+CLUSTER_SIDE = 2 * CLUSTER_RADIUS + 1  # 5
 CLUSTER_TILES = CLUSTER_SIDE * CLUSTER_SIDE  # 25
 CENTRE = CLUSTER_TILES // 2  # 12
 CLONE_RADII = tuple(range(CLUSTER_RADIUS, -1, -1))  # (2, 1, 0): clone n keeps max(|dy|, |dx|) <= CLONE_RADII[n]
@@ -49,42 +54,17 @@ Layer = tuple[Tensor, Tensor]  # (weight (out, in), bias (out,)) as in nn.Linear
 
 
 # ---------------------------------------------------------------------------------------------- checks
-def _check_tensor(name: str, x, *, floating: bool = True) -> None:
-    if not isinstance(x, Tensor):
-        raise TypeError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
-    if floating and not x.is_floating_point():
-        raise TypeError(f"{name}: expected a floating-point tensor, got {x.dtype}")
-
-
-def _check_like(name: str, x: Tensor, ref: Tensor, ref_name: str) -> None:
-    """``x`` must share ``ref``'s device and dtype."""
-    if x.device != ref.device:
-        raise ValueError(f"{name}: devices do not match ({x.device} vs {ref.device} of {ref_name})")
-    if x.dtype != ref.dtype:
-        raise TypeError(f"{name}: expected dtype {ref.dtype} (that of {ref_name}), got {x.dtype}")
-
-
 def _check_layers(stage1: Sequence[Layer], stage2: Sequence[Layer]) -> None:
     if len(stage1) < 1 or len(stage2) < 1:
         raise ValueError(f"stage1/stage2: expected at least one layer each, got {len(stage1)} and {len(stage2)}")
     if stage1[0][0].shape[1] != TILE_INPUTS:
         raise ValueError(f"stage1: expected a first layer with {TILE_INPUTS} inputs, got {stage1[0][0].shape[1]}")
     features = stage1[-1][0].shape[0]
-    if stage2[0][0].shape[1] != CLUSTER_TILES * features:
-        raise ValueError(f"stage2: expected a first layer with {CLUSTER_TILES}*{features} inputs, "
+    if stage2[0][0].shape[1] != CLUSTER_TILES * (features + 1):
+        raise ValueError(f"stage2: expected a first layer with {CLUSTER_TILES}*{features} + {CLUSTER_TILES} inputs, "
                          f"got {stage2[0][0].shape[1]}")
     if stage2[-1][0].shape[0] != 1:
         raise ValueError(f"stage2: expected a last layer with 1 output, got {stage2[-1][0].shape[0]}")
-
-
-def _clone_list(clone) -> tuple[list[int], bool]:
-    """Clone indices and whether a single one (int) was asked for."""
-    single = isinstance(clone, int) and not isinstance(clone, bool)
-    clones = [clone] if single else list(clone) if isinstance(clone, Sequence) else None
-    if clones is None or not clones or any(
-            not isinstance(c, int) or isinstance(c, bool) or c not in range(len(CLONE_RADII)) for c in clones):
-        raise ValueError(f"clone: expected 0, 1, 2 or a non-empty sequence of them, got {clone!r}")
-    return clones, single
 
 
 # ----------------------------------------------------------------------------------------- functional
@@ -101,14 +81,14 @@ def tile_inputs(layers: Tensor, target: Tensor) -> Tensor:
     >>> tile_inputs(torch.zeros(2, 25, 4, 9, 9), torch.ones(2, 25)).shape
     torch.Size([2, 25, 325])
     """
-    _check_tensor("layers", layers)
-    _check_tensor("target", target)
+    check_tensor("layers", layers)
+    check_tensor("target", target)
     if layers.dim() < 3 or tuple(layers.shape[-3:]) != (CORR_LAYERS, CORR_SIZE, CORR_SIZE):
         raise ValueError(f"layers: expected shape (..., 4, 9, 9), got {tuple(layers.shape)}")
     if target.shape != layers.shape[:-3]:
         raise ValueError(f"target: expected shape {tuple(layers.shape[:-3])} (the leading shape of layers), "
                          f"got {tuple(target.shape)}")
-    _check_like("target", target, layers, "layers")
+    check_like("target", target, layers, "layers")
     x = torch.cat([layers.reshape(*layers.shape[:-3], CORR_INPUTS), target.unsqueeze(-1)], dim=-1)
     return x.masked_fill_(x.isnan(), 0.0)  # in place: x is cat's new tensor
 
@@ -126,11 +106,11 @@ def gather_clusters(tile_map: Tensor, tile_y: Tensor, tile_x: Tensor) -> Tensor:
     >>> gather_clusters(torch.zeros(3, 4, 325), torch.tensor([0, 2]), torch.tensor([3, 1])).shape
     torch.Size([2, 25, 325])
     """
-    _check_tensor("tile_map", tile_map, floating=False)
+    check_tensor("tile_map", tile_map, floating=False)
     if tile_map.dim() < 2:
         raise ValueError(f"tile_map: expected shape (ty, tx, ...), got {tuple(tile_map.shape)}")
     for name, idx in (("tile_y", tile_y), ("tile_x", tile_x)):
-        _check_tensor(name, idx, floating=False)
+        check_tensor(name, idx, floating=False)
         if idx.is_floating_point() or idx.is_complex() or idx.dtype == torch.bool:
             raise TypeError(f"{name}: expected an integer tensor, got {idx.dtype}")
         if idx.dim() != 1 or idx.shape != tile_y.shape:
@@ -203,13 +183,15 @@ def clusters_residual(x: Tensor, stage1: Sequence[Layer], stage2: Sequence[Layer
         device / dtype.
     """
     _check_layers(stage1, stage2)
-    _check_tensor("x", x)
+    check_tensor("x", x)
     if x.dim() != 3 or tuple(x.shape[1:]) != (CLUSTER_TILES, TILE_INPUTS):
         raise ValueError(f"x: expected shape (B, {CLUSTER_TILES}, {TILE_INPUTS}), got {tuple(x.shape)}")
-    _check_like("x", x, stage1[0][0], "the parameters")
+    check_like("x", x, stage1[0][0], "the parameters")
     features = stage1_features(x.masked_fill(x.isnan(), 0.0), stage1)  # (B, 25, F)
-    masks = clone_masks(x.device, x.dtype).reshape(len(CLONE_RADII), 1, CLUSTER_TILES, 1)
-    z = (features.unsqueeze(0) * masks).flatten(2)  # (3, B, 25*F), [k*F + c]
+    relative = relative_targets(x[..., -1], x[:, CENTRE, -1:])  # (B, 25), from the targets before NaN -> 0
+    masks = clone_masks(x.device, x.dtype).reshape(len(CLONE_RADII), 1, CLUSTER_TILES)  # (3, 1, 25)
+    z = torch.cat([(features.unsqueeze(0) * masks.unsqueeze(-1)).flatten(2),
+                   relative.unsqueeze(0) * masks], dim=-1)  # (3, B, 25*F + 25): [k*F + c], then [25*F + k]
     return stage2_output(z, stage2).transpose(0, 1)  # (B, 3)
 
 
@@ -218,21 +200,24 @@ def _version(t: Tensor) -> int:
     return -1 if t.is_inference() else t._version
 
 
-def stage2_conv(first: Layer, clones: Sequence[int]) -> tuple[Tensor, Tensor]:
-    """Stage 2's first layer as 5x5 convolution kernels :math:`(n \\cdot hidden, F, 5, 5)` and biases
-    :math:`(n \\cdot hidden)`, one masked copy per clone: ``kernel[o, c, dy+2, dx+2] = W[o, k*F + c]``."""
+def stage2_conv(first: Layer, clones: Sequence[int]) -> tuple[Tensor, Tensor, Tensor]:
+    """Stage 2's first layer, one masked copy per clone, as 5x5 convolution kernels :math:`(n \\cdot hidden, F, 5, 5)`
+    (``kernel[o, c, dy+2, dx+2] = W[o, k*F + c]``), relative-target weights :math:`(n \\cdot hidden, 25)`
+    (``W[o, 25*F + k]``) and biases :math:`(n \\cdot hidden)`."""
     weight, bias = first
     hidden = weight.shape[0]
-    n_features = weight.shape[1] // CLUSTER_TILES
-    kernel = weight.view(hidden, CLUSTER_TILES, n_features).transpose(1, 2)
+    n_features = weight.shape[1] // CLUSTER_TILES - 1
+    kernel = weight[:, :CLUSTER_TILES * n_features].reshape(hidden, CLUSTER_TILES, n_features).transpose(1, 2)
     kernel = kernel.reshape(hidden, n_features, CLUSTER_SIDE, CLUSTER_SIDE)
     masks = clone_masks(weight.device, weight.dtype)[list(clones)]  # (n, 5, 5)
-    return (kernel.unsqueeze(0) * masks[:, None, None]).flatten(0, 1), bias.repeat(len(clones))
+    relative = weight[:, CLUSTER_TILES * n_features:].unsqueeze(0) * masks.flatten(1)[:, None]  # (n, hidden, 25)
+    return ((kernel.unsqueeze(0) * masks[:, None, None]).flatten(0, 1), relative.flatten(0, 1),
+            bias.repeat(len(clones)))
 
 
 def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stage2: Sequence[Layer], *,
                    grid: tuple[int, int] | None = None, active: Tensor | None = None, clone=0,
-                   conv: tuple[Tensor, Tensor] | None = None) -> Tensor:
+                   conv: tuple[Tensor, Tensor, Tensor] | None = None) -> Tensor:
     """Whole-frame form: residual disparity of every tile, by convolutions with the cluster form's weights.
 
     Args:
@@ -253,50 +238,40 @@ def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stag
         devices that differ, or a bad ``clone``.
     """
     _check_layers(stage1, stage2)
-    clones, single = _clone_list(clone)
-    _check_tensor("layers", layers)
-    _check_tensor("target", target)
-    if grid is not None:
-        if (not isinstance(grid, Sequence) or len(grid) != 2
-                or not all(isinstance(g, int) and not isinstance(g, bool) and g > 0 for g in grid)):
-            raise ValueError(f"grid: expected (tiles_y, tiles_x) of positive ints, got {grid!r}")
-        ty, tx = grid
-    elif layers.dim() == 5:
-        ty, tx = layers.shape[:2]
-    else:
-        raise ValueError(f"layers: expected shape (ty, tx, 4, 9, 9), or (tiles, 4, 9, 9) with grid, "
-                         f"got {tuple(layers.shape)}")
+    clones, single = clone_list(clone, len(CLONE_RADII))
     tile_shape = (CORR_LAYERS, CORR_SIZE, CORR_SIZE)
-    if tuple(layers.shape) not in ((ty, tx, *tile_shape), (ty * tx, *tile_shape)):
-        raise ValueError(f"layers: expected shape ({ty}, {tx}, 4, 9, 9) or ({ty * tx}, 4, 9, 9), "
-                         f"got {tuple(layers.shape)}")
-    if tuple(target.shape) not in ((ty, tx), (ty * tx,)):
-        raise ValueError(f"target: expected shape ({ty}, {tx}), got {tuple(target.shape)}")
-    _check_like("layers", layers, stage1[0][0], "the parameters")
-    _check_like("target", target, stage1[0][0], "the parameters")
-    if active is not None:
-        _check_tensor("active", active, floating=False)
-        if active.dtype != torch.bool:
-            raise TypeError(f"active: expected dtype torch.bool, got {active.dtype}")
-        if tuple(active.shape) != (ty, tx):
-            raise ValueError(f"active: expected shape ({ty}, {tx}), got {tuple(active.shape)}")
-        if active.device != layers.device:
-            raise ValueError(f"active: devices do not match ({active.device} vs {layers.device} of layers)")
+    ty, tx = frame_grid(layers, target, active, grid, tile_shape, stage1[0][0])
 
     x = tile_inputs(layers.reshape(ty, tx, *tile_shape), target.reshape(ty, tx))  # (ty, tx, 325)
     features = stage1_features(x, stage1)  # (ty, tx, F): stage 1 as a matmul over all tiles (1x1 conv)
     if active is not None:
         features = torch.where(active.unsqueeze(-1), features, torch.zeros_like(features))
-    n_features = features.shape[-1]
-    padded = F.pad(features.permute(2, 0, 1).unsqueeze(0), (CLUSTER_RADIUS,) * 4, mode="replicate")
+    residual = frame_stage2(features, target.reshape(ty, tx), stage2, clones, active=active, conv=conv)
+    return residual[..., 0] if single else residual
 
+
+def frame_stage2(features: Tensor, target: Tensor, stage2: Sequence[Layer], clones: Sequence[int], *,
+                 active: Tensor | None = None, conv: tuple[Tensor, Tensor, Tensor] | None = None) -> Tensor:
+    """Stage 2 of the whole-frame form: 5x5 convolution over replicate-padded stage-1 features plus the relative
+    targets' term, then the per-tile rest. Arguments as :func:`frame_residual` (checked there).
+
+    Args:
+        features: :math:`(ty, tx, F)` stage-1 features (zero on inactive tiles).
+        target: :math:`(ty, tx)` target disparities (px).
+
+    Returns:
+        :math:`(ty, tx, n)` residuals of the ``n`` clones.
+    """
+    ty, tx = target.shape
+    padded = F.pad(features.permute(2, 0, 1).unsqueeze(0), (CLUSTER_RADIUS,) * 4, mode="replicate")
     hidden = stage2[0][0].shape[0]
-    kernels, biases = conv if conv is not None else stage2_conv(stage2[0], clones)
+    kernels, relative_weight, biases = conv if conv is not None else stage2_conv(stage2[0], clones)
     z = F.conv2d(padded, kernels, biases)  # (1, n*hidden, ty, tx)
     z = z.view(len(clones), hidden, ty, tx).permute(2, 3, 0, 1)  # (ty, tx, n, hidden)
+    relative = frame_relative_targets(target, active)  # (ty*tx, 25)
+    z = z + (relative @ relative_weight.T).view(ty, tx, len(clones), hidden)
     z = F.leaky_relu(z, NEGATIVE_SLOPE) if len(stage2) > 1 else z
-    residual = stage2_output(z, stage2[1:]) if len(stage2) > 1 else z.squeeze(-1)  # (ty, tx, n)
-    return residual[..., 0] if single else residual
+    return stage2_output(z, stage2[1:]) if len(stage2) > 1 else z.squeeze(-1)  # (ty, tx, n)
 
 
 # ----------------------------------------------------------------------------------------------- module
@@ -309,7 +284,8 @@ class TPNet(nn.Module):
             layer ``16 -> 1`` follows.
 
     Parameters: Xavier-uniform weights, zero biases (tf-slim defaults). ``stage1[i]`` / ``stage2[i]`` are
-    ``nn.Linear``; ``stage2[-1]`` is the output layer (no activation). Default size: 120 480 + 224 129.
+    ``nn.Linear``; ``stage2[-1]`` is the output layer (no activation). Default size: 120 480 + 230 529 (224 129
+    + 25 x 256 relative-target weights).
 
     Shape:
         - :meth:`forward_clusters` (= ``forward``): :math:`(B, 25, 325) \\to (B, 3)`.
@@ -332,11 +308,20 @@ class TPNet(nn.Module):
         self.stage1_widths = tuple(stage1_widths)
         self.stage2_widths = tuple(stage2_widths)
         s1 = (TILE_INPUTS, *self.stage1_widths)
-        s2 = (CLUSTER_TILES * self.stage1_widths[-1], *self.stage2_widths, 1)
+        s2 = (CLUSTER_TILES * (self.stage1_widths[-1] + 1), *self.stage2_widths, 1)
         self.stage1 = nn.ModuleList(nn.Linear(a, b) for a, b in zip(s1[:-1], s1[1:]))
         self.stage2 = nn.ModuleList(nn.Linear(a, b) for a, b in zip(s2[:-1], s2[1:]))
         self._conv, self._conv_key = None, None  # inference's stage-2 kernels and the weights they came from
         self.reset_parameters()
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        """Weights of the layout before the relative targets (stage 2's first layer with 25*F inputs) load with
+        zero weights on those inputs, so they give the outputs they were trained to give."""
+        key = prefix + "stage2.0.weight"
+        old = state_dict.get(key)
+        if old is not None and old.shape[1] == CLUSTER_TILES * self.stage1_widths[-1]:
+            state_dict[key] = torch.cat([old, old.new_zeros(old.shape[0], CLUSTER_TILES)], dim=1)
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     def reset_parameters(self) -> None:
         """Xavier-uniform weights, zero biases."""
@@ -369,7 +354,7 @@ class TPNet(nn.Module):
         stage1, stage2 = self._params()
         conv = None
         if not torch.is_grad_enabled():  # inference: stage 2's kernels are made once per set of weights
-            clones = tuple(_clone_list(clone)[0])
+            clones = tuple(clone_list(clone, len(CLONE_RADII))[0])
             weight, bias = stage2[0]
             key = (clones, weight.data_ptr(), _version(weight), bias.data_ptr(), _version(bias))
             if self._conv_key != key:

@@ -12,6 +12,6 @@ def test_stage1_then_stage2_is_the_whole_network():
     net = TPNet()
     layers, target = torch.randn(7, 9, 4, 9, 9), torch.randn(7, 9)
     with torch.no_grad():
-        split = network_stage2(net, network_stage1(net, layers, target))
+        split = network_stage2(net, network_stage1(net, layers, target), target)
         torch.testing.assert_close(split, net.forward_frame(layers, target), atol=1e-6, rtol=0)
         assert split.std() > 0.01

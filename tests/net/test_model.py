@@ -1,7 +1,8 @@
 """TPNet (net/model.py): the cluster form against the whole-frame form, clones, masks, devices, validation.
 
 Oracles: the cluster form on 5x5 clusters cut with explicit, clipped neighbour indices (Python loops) for the
-whole-frame form (atol 1e-5, float32; measured ~1e-7); network.md §2-3 for the parameter counts; a "meta"
+whole-frame form (atol 1e-5, float32; measured ~1e-7); per-tile loops for the relative targets (exact);
+network.md §2-3 for the parameter counts; a "meta"
 device and patched host-copy methods for "no host copy"; a synthetic residual for training.
 """
 
@@ -15,6 +16,7 @@ from tpnet_gpu.net.model import (
     CENTRE,
     TPNet,
     clusters_residual,
+    frame_relative_targets,
     gather_clusters,
     stage1_features,
     stage2_output,
@@ -43,6 +45,12 @@ def _frame(seed=0, ty=TY, tx=TX, device="cpu", nan=True):
     return layers.to(device), target.to(device)
 
 
+def _raw_inputs(layers, target):
+    """(ty, tx, 325) layers then target, NaN kept: the cluster form's own input (it reads the targets before
+    NaN -> 0 for the relative targets)."""
+    return torch.cat([layers.flatten(-3), target.unsqueeze(-1)], dim=-1)
+
+
 def _clusters_by_loops(tile_map):
     """(ty*tx, 25, ...) in raster order of centres, neighbour indices clipped: the oracle's own cut."""
     ty, tx = tile_map.shape[:2]
@@ -55,10 +63,11 @@ def _clusters_by_loops(tile_map):
 
 
 def test_parameter_counts_and_init():
-    # Oracle: network.md §3 (stage 1 = 120 480, stage 2 = 224 129); tf-slim init (Xavier-uniform, zero bias).
+    # Oracle: network.md §3 (stage 1 = 120 480, stage 2 = 224 129 + 25 x 256 relative-target weights);
+    # tf-slim init (Xavier-uniform, zero bias).
     net = TPNet()
     assert sum(p.numel() for p in net.stage1.parameters()) == 120_480
-    assert sum(p.numel() for p in net.stage2.parameters()) == 224_129
+    assert sum(p.numel() for p in net.stage2.parameters()) == 224_129 + 25 * 256
     for layer in (*net.stage1, *net.stage2):
         bound = math.sqrt(6 / sum(layer.weight.shape))
         assert layer.weight.abs().max() <= bound
@@ -101,7 +110,7 @@ def test_frame_form_equals_cluster_form(torch_device):
     torch.manual_seed(1)
     net = TPNet().to(torch_device)
     layers, target = _frame(device=torch_device)
-    clusters = _clusters_by_loops(tile_inputs(layers, target))  # (63, 25, 325)
+    clusters = _clusters_by_loops(_raw_inputs(layers, target))  # (63, 25, 325)
     with torch.no_grad():
         want = net.forward_clusters(clusters).view(TY, TX, 3)
         for clone in range(3):
@@ -119,7 +128,7 @@ def test_frame_form_with_inference_weights_and_new_weights():
     no version counter) work, and weights changed in place are picked up. Oracle: forward_clusters; atol 1e-5."""
     torch.manual_seed(2)
     layers, target = _frame(device=torch.device("cpu"))
-    clusters = _clusters_by_loops(tile_inputs(layers, target))
+    clusters = _clusters_by_loops(_raw_inputs(layers, target))
     with torch.inference_mode():
         net = TPNet()
         net.load_state_dict({k: v.clone() for k, v in TPNet().state_dict().items()})
@@ -148,8 +157,53 @@ def test_clones_mask_neighbours():
     assert d1[0] > 0 and d1[1] > 0 and d1[2] == 0
 
 
+def _relative_by_loops(target):
+    """(ty*tx, 25) oracle of the relative targets: clipped neighbour indices, NaN -> 0, clip +-2 px."""
+    ty, tx = target.shape
+    out = torch.zeros(ty * tx, 25)
+    for y in range(ty):
+        for x in range(tx):
+            for k, (dy, dx) in enumerate((dy, dx) for dy in range(-2, 3) for dx in range(-2, 3)):
+                d = float(target[min(max(y + dy, 0), ty - 1), min(max(x + dx, 0), tx - 1)] - target[y, x])
+                out[y * tx + x, k] = 0.0 if math.isnan(d) else min(max(d, -2.0), 2.0)
+    return out
+
+
+def test_relative_targets_equal_loops():
+    # Oracle: _relative_by_loops (exact); targets spread over +-4 px so the clip is exercised.
+    layers, target = _frame(seed=5)
+    target = target * 2
+    assert torch.equal(frame_relative_targets(target), _relative_by_loops(target))
+    active = torch.ones(TY, TX, dtype=torch.bool)
+    active[3, 4] = False
+    inactive_nan = torch.where(active, target, torch.full_like(target, float("nan")))
+    assert torch.equal(frame_relative_targets(target, active), _relative_by_loops(inactive_nan))
+    got = frame_relative_targets(target)
+    assert got.abs().max() == 2.0 and (got.abs() < 2.0).any()
+
+
+def test_old_layout_weights_load_with_zero_relative_columns():
+    # Oracle: a stage 2 without the relative-target inputs, computed by hand (stage2_output on the 800 features)
+    # from the old weights, equals the model loaded from them.
+    torch.manual_seed(4)
+    net = TPNet()
+    old = {k: v.clone() for k, v in net.state_dict().items()}
+    old["stage2.0.weight"] = old["stage2.0.weight"][:, :800].clone()
+    loaded = TPNet()
+    loaded.load_state_dict(old)
+    assert torch.count_nonzero(loaded.stage2[0].weight[:, 800:]) == 0
+    layers, target = _frame(seed=4, nan=False)
+    stage1 = [(m.weight, m.bias) for m in loaded.stage1]
+    stage2 = [(old["stage2.0.weight"], old["stage2.0.bias"])] + [(m.weight, m.bias) for m in loaded.stage2[1:]]
+    with torch.no_grad():
+        feats = stage1_features(tile_inputs(layers, target), stage1)
+        want = stage2_output(_clusters_by_loops(feats).flatten(1), stage2).view(TY, TX)
+        torch.testing.assert_close(loaded.forward_frame(layers, target), want, atol=ATOL, rtol=0)
+
+
 def test_active_mask_zeroes_stage1_features():
-    # Oracle: stage 1 per tile, inactive tiles' features set to 0, loop-cut clusters, stage 2 on each.
+    # Oracle: stage 1 per tile, inactive tiles' features set to 0 and their relative targets to 0, loop-cut
+    # clusters, stage 2 on each.
     torch.manual_seed(3)
     net = TPNet()
     layers, target = _frame(seed=3)
@@ -159,7 +213,9 @@ def test_active_mask_zeroes_stage1_features():
     stage2 = [(m.weight, m.bias) for m in net.stage2]
     with torch.no_grad():
         feats = stage1_features(tile_inputs(layers, target), stage1) * active[..., None]
-        want = stage2_output(_clusters_by_loops(feats).flatten(1), stage2).view(TY, TX)
+        relative = _relative_by_loops(torch.where(active, target, torch.full_like(target, float("nan"))))
+        z = torch.cat([_clusters_by_loops(feats).flatten(1), relative], dim=1)
+        want = stage2_output(z, stage2).view(TY, TX)
         got = net.forward_frame(layers, target, active=active)
     torch.testing.assert_close(got, want, atol=ATOL, rtol=0)
     assert (got - net.forward_frame(layers, target).detach()).abs().max() > 1e-3
