@@ -15,7 +15,7 @@ from tpnet_gpu.config import CorrelationConfig, DatasetSpec
 from tpnet_gpu.net.model import TPNet
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
-DEFAULT_WEIGHTS = WEIGHTS_DIR / "tpnet_synthetic_v3.pt"
+DEFAULT_WEIGHTS = WEIGHTS_DIR / "tpnet_synthetic_v4.pt"
 
 
 def load(path=None, device=None) -> TPNet:

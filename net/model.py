@@ -267,9 +267,9 @@ def frame_stage2(features: Tensor, target: Tensor, stage2: Sequence[Layer], clon
     hidden = stage2[0][0].shape[0]
     kernels, relative_weight, biases = conv if conv is not None else stage2_conv(stage2[0], clones)
     z = F.conv2d(padded, kernels, biases)  # (1, n*hidden, ty, tx)
-    z = z.view(len(clones), hidden, ty, tx).permute(2, 3, 0, 1)  # (ty, tx, n, hidden)
     relative = frame_relative_targets(target, active)  # (ty*tx, 25)
-    z = z + (relative @ relative_weight.T).view(ty, tx, len(clones), hidden)
+    z.view(len(clones) * hidden, ty * tx).addmm_(relative_weight, relative.T)  # in place: no product tensor
+    z = z.view(len(clones), hidden, ty, tx).permute(2, 3, 0, 1)  # (ty, tx, n, hidden)
     z = F.leaky_relu(z, NEGATIVE_SLOPE) if len(stage2) > 1 else z
     return stage2_output(z, stage2[1:]) if len(stage2) > 1 else z.squeeze(-1)  # (ty, tx, n)
 

@@ -44,6 +44,7 @@ def frame_relative_targets(target: Tensor, active: Tensor | None = None) -> Tens
     """
     ty, tx = target.shape
     t = target if active is None else torch.where(active, target, torch.full_like(target, float("nan")))
-    padded = F.pad(t.reshape(1, 1, ty, tx), (CLUSTER_RADIUS,) * 4, mode="replicate")
-    neighbours = F.unfold(padded, 2 * CLUSTER_RADIUS + 1)[0].T  # (ty*tx, 25): unfold's order is k
-    return relative_targets(neighbours, t.reshape(ty * tx, 1))
+    side = 2 * CLUSTER_RADIUS + 1
+    padded = F.pad(t.reshape(1, 1, ty, tx), (CLUSTER_RADIUS,) * 4, mode="replicate")[0, 0]  # (ty + 4, tx + 4)
+    neighbours = padded.unfold(0, side, 1).unfold(1, side, 1)  # (ty, tx, 5, 5) view: [y, x, dy+2, dx+2]
+    return relative_targets(neighbours, t[:, :, None, None]).reshape(ty * tx, side * side)  # order k

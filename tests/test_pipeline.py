@@ -69,11 +69,12 @@ def test_bad_network_passes():
         PipelineConfig(network_passes=0)
 
 
-# A steady-state frame outside the disparity engine (TPNET and the texture at the engine's answer): 32 torch
-# allocations of 1.5 MB in all (15.2 frame sizes) with torch 2.x on the CPU; before issue 14 50 of 2.6 MB (the
-# network rebuilt its stage-2 kernels and made new tensors for NaN fill and activations). The texture stages
-# allocate nothing (tests/test_processor.py). The bounds leave a small margin for other torch versions.
-MAX_ALLOCATIONS, MAX_FRAME_SIZES = 34, 16.0
+# A steady-state frame outside the disparity engine (TPNET and the texture at the engine's answer): 35 torch
+# allocations with torch 2.x on the CPU (32 of 1.5 MB in all, 15.2 frame sizes, before stage 2 read the relative
+# targets - their padded targets, masked targets and differences are 3 small tiles-sized tensors); before issue 14
+# 50 of 2.6 MB (the network rebuilt its stage-2 kernels and made new tensors for NaN fill and activations). The
+# texture stages allocate nothing (tests/test_processor.py). The bounds leave a small margin for other torch versions.
+MAX_ALLOCATIONS, MAX_FRAME_SIZES = 37, 16.0
 
 
 def test_a_frame_outside_the_engine_allocates_little(frames, weights):
