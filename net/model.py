@@ -294,7 +294,7 @@ def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stag
     kernels, biases = conv if conv is not None else stage2_conv(stage2[0], clones)
     z = F.conv2d(padded, kernels, biases)  # (1, n*hidden, ty, tx)
     z = z.view(len(clones), hidden, ty, tx).permute(2, 3, 0, 1)  # (ty, tx, n, hidden)
-    z = F.leaky_relu(z, NEGATIVE_SLOPE) if len(stage2) > 1 else z
+    z = F.leaky_relu(z, NEGATIVE_SLOPE, inplace=True) if len(stage2) > 1 else z  # in place: 80 MB less at 5 MPix
     residual = stage2_output(z, stage2[1:]) if len(stage2) > 1 else z.squeeze(-1)  # (ty, tx, n)
     return residual[..., 0] if single else residual
 

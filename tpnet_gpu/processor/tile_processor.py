@@ -124,6 +124,12 @@ class TileProcessor:
         return self._frame_count
 
     @property
+    def staging(self) -> torch.Tensor:
+        """The ``(cams, height, width)`` float32 staging buffer ``load`` copies frames into: a caller may write a
+        frame there (e.g. scaled) and ``load`` it, which then reads it in place (no copy without graphs)."""
+        return self._buffers.frames_t
+
+    @property
     def result(self) -> TileResult:
         """The output views (what ``process`` returns), as the stages last left them."""
         return self._buffers.result
