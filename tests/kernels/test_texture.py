@@ -52,7 +52,7 @@ def test_texture_equals_reference(device, backend, cfa, diff_sigma):
 
 @pytest.mark.parametrize("rows", [1, 2, 4])
 def test_texture_in_bands_equals_reference(device, backend, rows, monkeypatch):
-    """The texture is made one band of tile rows at a time (Buffers.TEXTURE_BAND_ROWS, 16): with bands of 1, 2
+    """The texture is made one band of tile rows at a time (Buffers.TEXTURE_BAND_ROWS, 8): with bands of 1, 2
     and 4 rows (6 rows of tiles: 6, 3 and 2 bands, the last one short) it still equals the reference. Tiles
     (2, 3), (3, 6) and (4, 1) sit on band edges with one contributing neighbour (the alpha fades towards it),
     so a band that took the rows beyond its edges as contributing would differ (checked: it fails)."""

@@ -51,16 +51,16 @@ class TileResult:
 
 
 # Tile rows of one texture band: the texture's per-camera scratch is 1 KiB per tile, camera and colour (pix and
-# cmp) - 1.9 GB for a 5 MPix quad frame at once, 0.16 GB per band of 16 rows. A texturing processor without
-# ``clt=True`` also converts band by band into a band of CLT tiles (60 MiB instead of 0.9 GiB at 5 MPix) and
+# cmp) - 1.9 GB for a 5 MPix quad frame at once, 61 MiB per band of 8 rows. A texturing processor without
+# ``clt=True`` also converts band by band into a band of CLT tiles (30 MiB instead of 0.9 GiB at 5 MPix) and
 # keeps the RGBA contributions of ``ring_rows`` tile rows (the band and the row above it, which the overlap-add
-# of the band's first canvas rows reads): 22 MiB instead of 306 MiB.
-TEXTURE_BAND_ROWS = 16
+# of the band's first canvas rows reads): 12 MiB instead of 306 MiB. (16 rows: 110 MiB more at 5 MPix.)
+TEXTURE_BAND_ROWS = 8
 
 
 def texture_band_tiles(tiles_y: int, tiles_x: int) -> int:
     """Tiles the texture scratch holds: one band."""
-    return min(TEXTURE_BAND_ROWS + 1, tiles_y) * tiles_x
+    return min(TEXTURE_BAND_ROWS, tiles_y) * tiles_x
 
 
 def texture_ring_rows(tiles_y: int) -> int:
