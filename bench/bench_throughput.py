@@ -107,7 +107,7 @@ def run_warp(args, cfa, device, frames_t, target, net) -> dict:
     the twins are compared with, and set-up facts; the processor itself is freed on return."""
     tdev = target.device
     start = time.perf_counter()
-    tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, device=str(device), backend="warp")
+    tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, clt=True, device=str(device), backend="warp")
     setup_ms = 1e3 * (time.perf_counter() - start)
     if tp.pairs != tables.QUAD_PAIRS:
         raise SystemExit("the network needs the quad's 6 pairs (network layers)")

@@ -99,7 +99,7 @@ def main(argv=None) -> dict:
 
     # --- Warp -----------------------------------------------------------------------------------------------------
     start = time.perf_counter()
-    tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, device=args.device, backend="warp")
+    tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, clt=True, device=args.device, backend="warp")
     setup_ms = 1e3 * (time.perf_counter() - start)
     log(f"{args.width}x{args.height}, {cams} cameras, {tp.tiles} tiles, {len(tp.pairs)} pairs on {tp.device} "
         f"({common.device_name(tp.device)}); processor built in {setup_ms:.0f} ms")

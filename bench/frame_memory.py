@@ -5,8 +5,8 @@
 Each measurement runs in a fresh child process (``ru_maxrss`` is a process-lifetime peak): the frames are made
 first (the demo scene rendered without supersampling, or ``common.random_frames``) and saved to a temporary
 ``.npy`` by another child, so rendering never counts. The child reports the peak RSS after ``import``, after
-building the pipeline, and after each of ``--frames-run`` frames, and the bytes of every device buffer the
-pipeline owns (tile-processor ``Buffers`` arrays by name, the engine's cost volumes, the network's parameters).
+building the pipeline, and after each of ``--frames-run`` frames, the wall and CPU seconds of each frame (medians
+printed; the first includes compile and cache warm-up), and the bytes of every device buffer the pipeline owns (tile-processor ``Buffers`` arrays by name, the engine's cost volumes, the network's parameters).
 Runs over ~2 GB must be serialised on a shared machine (``flock /tmp/bigrun.lock python -m ...``).
 """
 
@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import json
 import resource
+import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -74,11 +76,16 @@ def _measure(path: str, frames_run: int, device: str) -> None:
     peaks = {"import": _peak_mib()}
     pipe = Pipeline(frames.shape[1], frames.shape[2], device=device)
     peaks["built"] = _peak_mib()
+    seconds, cpu_seconds = [], []
     for i in range(frames_run):
+        start, cpu_start = time.perf_counter(), time.process_time()
         pipe.process(frames)
+        seconds.append(time.perf_counter() - start)
+        cpu_seconds.append(time.process_time() - cpu_start)
         peaks[f"frame{i + 1}"] = _peak_mib()
     buffers = buffer_bytes(pipe)
-    print(json.dumps({"peak_mib": peaks, "buffers": buffers, "threads": torch.get_num_threads()}))
+    print(json.dumps({"peak_mib": peaks, "seconds": seconds, "cpu_seconds": cpu_seconds, "buffers": buffers,
+                      "threads": torch.get_num_threads()}))
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -86,7 +93,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--height", type=int, default=1936)
     parser.add_argument("--width", type=int, default=2592)
     parser.add_argument("--frames", choices=("demo", "random"), default="demo")
-    parser.add_argument("--frames-run", type=int, default=2, help="frames processed (default 2)")
+    parser.add_argument("--frames-run", type=int, default=3, help="frames processed (default 3)")
     parser.add_argument("--frames-file", default=None,
                         help="a .npy of the frames: used when it exists, else the frames are made and kept there")
     parser.add_argument("--device", default="cpu")
@@ -109,6 +116,10 @@ def main(argv: list[str] | None = None) -> dict:
     print("\n".join(common.format_table(("buffer", "MiB"), rows + [("total", f"{total / MIB:.1f}")])))
     print("\n".join(common.format_table(("step", "peak RSS MiB"),
                                         [(k, f"{v:.0f}") for k, v in child["peak_mib"].items()])))
+    for label in ("seconds", "cpu_seconds"):  # CPU seconds: all threads, less sensitive to a shared machine
+        values = child[label]
+        print(f"{label} per frame: median {statistics.median(values):.2f} (each: "
+              + ", ".join(f"{v:.2f}" for v in values) + "; the first includes warm-up)")
     if args.json:
         common.save_json(report, args.json)
     return report

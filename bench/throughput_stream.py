@@ -77,7 +77,7 @@ def measure_graph_replay(args, cfa, device, frames_t, target, net) -> dict:
 def soak(args, cfa, device, net: net_model.TPNet, frames_count: int) -> dict:
     """Stream ``frames_count`` fresh random frames through ``process`` + ``forward_frame``; RSS every 50 frames."""
     rng = np.random.default_rng(args.seed + 1)
-    tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, device=str(device), backend="warp")
+    tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, clt=True, device=str(device), backend="warp")
     cams = len(tables.QUAD_OFFSETS)
     samples = []
     start = time.perf_counter()

@@ -29,7 +29,7 @@ def run_taichi(args, cfa, device, frames_t, target, net) -> dict:
 
     tdev = target.device
     start = time.perf_counter()
-    tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, device=str(device), backend="taichi")
+    tp = TileProcessor(args.height, args.width, cfa=cfa, textures=True, clt=True, device=str(device), backend="taichi")
     setup_ms = 1e3 * (time.perf_counter() - start)
 
     def sync() -> None:

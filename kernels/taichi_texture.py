@@ -5,7 +5,7 @@ The same math, tables and layouts as the Warp module (see there), in three launc
 ``texture_imclt`` (one thread per tile, camera and colour: low-pass and inverse MCLT as two matrix products per
 quadrant, then the demosaic filter and compression of its rows as soon as the next row exists - the Warp
 module's ``texture_imclt`` + ``texture_demosaic``), ``texture_combine`` (per pixel of one band's tiles: camera
-weights in registers, colour, alpha and the alpha fade, written straight into the tile's slot of ``rgba``),
+weights in registers, colour, alpha and the alpha fade, written straight into the tile's slot of the ``rgba`` ring),
 ``overlap_add`` (per canvas pixel, fixed order, no atomics). ``cams`` and ``colours`` are compile-time
 (``ti.template``): one kernel per rig shape, loops over cameras unrolled. Bool masks are uint8 views;
 ``offsets`` is (cams, 2); ``inv_window2`` is 1 / W2 (16, 16).
@@ -156,6 +156,7 @@ def texture_combine(
     first: ti.i32,
     tiles_x: ti.i32,
     tiles_y: ti.i32,
+    ring_rows: ti.i32,
     cams: ti.template(),
     colours: ti.template(),
     offsets: F32_2D,
@@ -169,9 +170,10 @@ def texture_combine(
     rgba: F32_3D,
 ):
     """One thread per row (tile, r) of one band's contributing tiles (``pix``, ``cmp``: the band's tiles, frame
-    tiles ``first`` on; ``finite``, ``rgba``: the whole frame's), per pixel: weights (§7.3 a-d), colour =
-    weighted mean of T, alpha = W2 x mean weight, times the alpha fade, into the tile's contribution ``rgba``
-    (colours x output_gain). window2: (16, 16) W2 = w(r)^2 w(c)^2."""
+    tiles ``first`` on; ``finite``: the whole frame's), per pixel: weights (§7.3 a-d), colour = weighted mean of
+    T, alpha = W2 x mean weight, times the alpha fade, into the tile's contribution (colours x output_gain) in
+    the ring ``rgba`` (texture.texture_combine's: tile row ty in slot row ty % ring_rows). window2: (16, 16)
+    W2 = w(r)^2 w(c)^2."""
     xi = 1.0 / (2.0 * diff_sigma * diff_sigma)
     # Per rig constants, once: -xi / |offset_b - offset_a|^2 of each pair (a < b) and the colour weights.
     pair_scale = ti.Vector.zero(ti.f32, cams * cams)
@@ -185,9 +187,9 @@ def texture_combine(
         tile = first + band_tile
         if finite[tile] != 0:
             base = band_tile * cams
-            out = tile * (colours + 1)
             ty = tile // tiles_x
             tx = tile - ty * tiles_x
+            out = ((ty % ring_rows) * tiles_x + tx) * (colours + 1)
             # Positions outside the frame count as contributing: only the region's edges inside the frame fade.
             # Neighbour reads guarded by if statements (never read off the tile grid).
             north = 1
@@ -271,11 +273,14 @@ def texture_combine(
 
 
 @ti.kernel
-def overlap_add(rgba: F32_3D, finite: U8_1D, tiles_x: ti.i32, tiles_y: ti.i32, canvas: F32_3D):
-    """canvas[ch, y, x] = sum of the contributing tiles' ``rgba`` covering (y, x), tiles in row-major order (the
-    Warp kernel's order: bit-reproducible with any thread count); every canvas pixel is written. One thread per
-    8 pixels of a canvas row: the same up to 4 tiles cover them (canvas width W + 8, a multiple of 8)."""
-    for ch, y, block in ti.ndrange(canvas.shape[0], canvas.shape[1], canvas.shape[2] // 8):
+def overlap_add(rgba: F32_3D, finite: U8_1D, tiles_x: ti.i32, tiles_y: ti.i32, ring_rows: ti.i32, y0: ti.i32,
+                rows: ti.i32, canvas: F32_3D):
+    """canvas[ch, y, x] for canvas rows y0 .. y0 + rows - 1 = sum of the contributing tiles' ``rgba`` (the ring of
+    texture_combine) covering (y, x), tiles in row-major order (the Warp kernel's order: bit-reproducible with
+    any thread count); every pixel of those rows is written. One thread per 8 pixels of a canvas row: the same up
+    to 4 tiles cover them (canvas width W + 8, a multiple of 8)."""
+    for ch, row, block in ti.ndrange(canvas.shape[0], rows, canvas.shape[2] // 8):
+        y = y0 + row
         channels = canvas.shape[0]
         acc = ti.Vector.zero(ti.f32, 8)
         for dy, dx in ti.static(ti.ndrange(2, 2)):
@@ -284,7 +289,8 @@ def overlap_add(rgba: F32_3D, finite: U8_1D, tiles_x: ti.i32, tiles_y: ti.i32, c
             if ty >= 0 and ty < tiles_y and tx >= 0 and tx < tiles_x:
                 tile = ty * tiles_x + tx
                 if finite[tile] != 0:
+                    slot = (ty % ring_rows) * tiles_x + tx
                     for i in ti.static(range(8)):
-                        acc[i] += rgba[tile * channels + ch, y - 8 * ty, i + 8 * (1 - dx)]
+                        acc[i] += rgba[slot * channels + ch, y - 8 * ty, i + 8 * (1 - dx)]
         for i in ti.static(range(8)):
             canvas[ch, y, 8 * block + i] = acc[i]

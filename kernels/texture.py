@@ -146,6 +146,7 @@ def texture_combine(
     first: int,
     tiles_x: int,
     tiles_y: int,
+    ring_rows: int,
     cams: int,
     colours: int,
     offsets: wp.array(dtype=wp.vec2f),
@@ -159,9 +160,9 @@ def texture_combine(
     rgba: wp.array3d(dtype=wp.float32),
 ):
     """Per pixel (tile, r, c) of one band's contributing tiles (``pix``, ``cmp``, ``weights``: the band's tiles,
-    frame tiles ``first`` on; ``finite``, ``rgba``: the whole frame's): weights (§7.3 a-d), colour = weighted
-    mean of T, alpha = W2 x mean weight, times the alpha fade, into the tile's contribution ``rgba`` (colours x
-    output_gain)."""
+    frame tiles ``first`` on; ``finite``: the whole frame's): weights (§7.3 a-d), colour = weighted mean of T,
+    alpha = W2 x mean weight, times the alpha fade, into the tile's contribution (colours x output_gain) in the
+    ring ``rgba`` (ring_rows * tiles_x * (colours + 1), 16, 16): tile row ty in slot row ty % ring_rows."""
     band_tile, r, c = wp.tid()
     tile = first + band_tile
     if not finite[tile]:
@@ -233,7 +234,7 @@ def texture_combine(
     west = tx == 0 or finite[tile - 1]
     east = tx + 1 == tiles_x or finite[tile + 1]
     fade = alpha_fade(north, east, south, west, r, c)
-    out = tile * (colours + 1)
+    out = ((ty % ring_rows) * tiles_x + tx) * (colours + 1)
     gain = output_gain * fade / total
     for k in range(colours):
         acc = float(0.0)
@@ -249,11 +250,15 @@ def overlap_add(
     finite: wp.array(dtype=wp.bool),
     tiles_x: int,
     tiles_y: int,
+    ring_rows: int,
+    y0: int,
     canvas: wp.array3d(dtype=wp.float32),
 ):
-    """canvas[ch, y, x] = sum of the contributing tiles' ``rgba`` that cover (y, x), tiles in row-major order
-    (canvas pixel y is row y - 8 ty of tiles ty = y // 8 - 1 and y // 8); every canvas pixel is written."""
-    ch, y, x = wp.tid()
+    """canvas[ch, y, x] for the canvas rows y = y0 + row of the launch (channels, rows, W + 8) = sum of the
+    contributing tiles' ``rgba`` (the ring of texture_combine) that cover (y, x), tiles in row-major order
+    (canvas pixel y is row y - 8 ty of tiles ty = y // 8 - 1 and y // 8); every pixel of those rows is written."""
+    ch, row, x = wp.tid()
+    y = y0 + row
     channels = canvas.shape[0]
     acc = float(0.0)
     for ty in range(y // 8 - 1, y // 8 + 1):
@@ -261,5 +266,6 @@ def overlap_add(
             if ty >= 0 and ty < tiles_y and tx >= 0 and tx < tiles_x:
                 tile = ty * tiles_x + tx
                 if finite[tile]:
-                    acc += rgba[tile * channels + ch, y - 8 * ty, x - 8 * tx]
+                    slot = (ty % ring_rows) * tiles_x + tx
+                    acc += rgba[slot * channels + ch, y - 8 * ty, x - 8 * tx]
     canvas[ch, y, x] = acc

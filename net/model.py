@@ -270,7 +270,7 @@ def frame_stage2(features: Tensor, target: Tensor, stage2: Sequence[Layer], clon
     relative = frame_relative_targets(target, active)  # (ty*tx, 25)
     z.view(len(clones) * hidden, ty * tx).addmm_(relative_weight, relative.T)  # in place: no product tensor
     z = z.view(len(clones), hidden, ty, tx).permute(2, 3, 0, 1)  # (ty, tx, n, hidden)
-    z = F.leaky_relu(z, NEGATIVE_SLOPE) if len(stage2) > 1 else z
+    z = F.leaky_relu(z, NEGATIVE_SLOPE, inplace=True) if len(stage2) > 1 else z  # in place: 80 MB less at 5 MPix
     return stage2_output(z, stage2[1:]) if len(stage2) > 1 else z.squeeze(-1)  # (ty, tx, n)
 
 

@@ -171,8 +171,8 @@ def test_graph_replay_equals_plain_launches(device):
     # Recorded once, replayed for later frames with new inputs (CUDA graph on the GPU; recorded launches
     # on the CPU). Oracle: the same processor without a graph.
     rng = np.random.default_rng(31)
-    plain = TileProcessor(H, W, textures=True, graph=False, device=device, backend="warp")
-    graphed = TileProcessor(H, W, textures=True, graph=True, device=device)
+    plain = TileProcessor(H, W, textures=True, clt=True, graph=False, device=device, backend="warp")
+    graphed = TileProcessor(H, W, textures=True, clt=True, graph=True, device=device)
     for _ in range(3):
         frames = rng.uniform(0, 4000, size=(4, H, W)).astype(np.float32)
         disparity = rng.uniform(-3, 3, size=(H // 8, W // 8)).astype(np.float32)
@@ -208,7 +208,9 @@ def test_clt_tiles_are_kept_only_when_asked(backend, frames):
     assert fused._buffers.clt is None and fused.process(frames, 1.0).clt is None
     with pytest.raises(RuntimeError, match="clt=True"):
         fused.convert()
-    assert TileProcessor(H, W, textures=True, device="cpu", backend=backend).result.clt is not None
+    textured = TileProcessor(H, W, textures=True, device="cpu", backend=backend)  # converts band by band
+    assert textured._buffers.clt is None and textured.process(frames, 1.0).clt is None
+    assert TileProcessor(H, W, clt=True, device="cpu", backend=backend).result.clt is not None
 
 
 def test_texture_after_a_fused_measure_converts_first(backend, frames):

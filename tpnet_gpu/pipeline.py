@@ -117,7 +117,7 @@ class Pipeline:
         if self.model is not None:
             tp = self.network_tp
             if tp is not self.engine.tp:
-                tp.load(self.engine.normalise(frames))
+                tp.load(self.engine.normalise(frames, out=tp.staging))
             # tiles the refinement left unmeasured are read at the first stage's answer (always finite)
             target = torch.where(measured, initial, result.search)
             for _ in range(cfg.network_passes):

@@ -26,7 +26,7 @@ H, W = 32, 48  # 4 x 6 tiles
 
 
 def test_counted_bytes_are_the_processor_buffers():
-    tp = TileProcessor(H, W, textures=True, device="cpu", backend="warp")
+    tp = TileProcessor(H, W, textures=True, clt=True, device="cpu", backend="warp")
     counted = fl.buffer_elements(H, W, tp.cams, tp.colours, len(tp.pairs))
     band = texture_band_tiles(tp.tiles_y, tp.tiles_x) / tp.tiles  # the scratch holds one band of the frame
     for name, elements in counted.items():

@@ -36,7 +36,7 @@ SCRIPT = textwrap.dedent("""
         out = {}
         names = ("clt", "corr", "layers", "valid", "texture") if split else ("corr", "layers", "valid")
         for block_dim in (1, CUDA_BLOCK_DIM):
-            tp = TileProcessor(H, W, textures=split, device="cpu", backend="warp", graph=False, **kw)
+            tp = TileProcessor(H, W, textures=split, clt=split, device="cpu", backend="warp", graph=False, **kw)
             tp._backend.block_dim = block_dim
             r = tp.process(frames, disparity, active=active)
             out[block_dim] = {k: getattr(r, k).clone() for k in names}

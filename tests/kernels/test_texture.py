@@ -52,7 +52,7 @@ def test_texture_equals_reference(device, backend, cfa, diff_sigma):
 
 @pytest.mark.parametrize("rows", [1, 2, 4])
 def test_texture_in_bands_equals_reference(device, backend, rows, monkeypatch):
-    """The texture is made one band of tile rows at a time (Buffers.TEXTURE_BAND_ROWS, 16): with bands of 1, 2
+    """The texture is made one band of tile rows at a time (Buffers.TEXTURE_BAND_ROWS, 8): with bands of 1, 2
     and 4 rows (6 rows of tiles: 6, 3 and 2 bands, the last one short) it still equals the reference. Tiles
     (2, 3), (3, 6) and (4, 1) sit on band edges with one contributing neighbour (the alpha fades towards it),
     so a band that took the rows beyond its edges as contributing would differ (checked: it fails)."""
@@ -99,3 +99,35 @@ def test_texture_is_bit_reproducible(backend):
     first = tp.process(frames, disparity).texture.clone()
     for _ in range(8):
         torch.testing.assert_close(tp.process(frames, disparity).texture, first, rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("rows", [1, 2, 16])
+def test_banded_convert_equals_whole_frame_texture(device, backend, rows, monkeypatch):
+    """Without ``clt=True`` the texture converts band by band into a band of CLT tiles and keeps the RGBA
+    contributions of ``rows + 1`` tile rows (a ring); oracle: the same processor built with ``clt=True``, which
+    textures from the whole frame's CLT tiles (checked against the float64 reference above), bit for bit, with
+    the ``valid`` mask. Bands of 1 and 2 rows wrap the ring (6 tile rows); the masked tiles of
+    test_texture_in_bands_equals_reference (tiles on band edges with one contributing neighbour: the alpha
+    fade reads the next band's ``finite``, stale from a measure at other targets until that band is converted)
+    and an inactive one. Checked to fail: converting the next band after the combine, or a ring of ``rows``
+    rows."""
+    monkeypatch.setattr(buffers, "TEXTURE_BAND_ROWS", rows)
+    rng = np.random.default_rng(52)
+    _, frames = _scene(rng, 1.3)
+    disparity = (1.3 + rng.uniform(-0.3, 0.3, size=(H // 8, W // 8))).astype(np.float32)
+    for tile in [(2, 2), (2, 4), (1, 3), (3, 5), (3, 7), (4, 6), (4, 0), (4, 2)]:
+        disparity[tile] = np.nan
+    active = np.ones((H // 8, W // 8), bool)
+    active[3, 1] = False
+    banded = TileProcessor(H, W, textures=True, device=device, backend=backend)
+    whole = TileProcessor(H, W, textures=True, clt=True, device=device, backend=backend)
+    assert banded._buffers.clt is None and banded._buffers.tex_rgba.shape[0] == min(rows + 1, H // 8) * (W // 8) * 4
+    for tp in (banded, whole):
+        tp.load(frames)
+        tp.measure(0.0)  # other targets first: the texture must convert at its own
+        tp.set_targets(disparity, active=active)
+        tp.texture()
+    for name in ("texture", "valid"):
+        torch.testing.assert_close(getattr(banded.result, name), getattr(whole.result, name), rtol=0, atol=0)
+    got = banded.process(frames, disparity, active=active)
+    torch.testing.assert_close(got.texture, whole.process(frames, disparity, active=active).texture, rtol=0, atol=0)

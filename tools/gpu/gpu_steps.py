@@ -157,7 +157,7 @@ def step_tp(args) -> dict:
             key = f"{width}x{height}_graph_{'on' if graph else 'off'}"
             memory(args.device, reset=True)
             start = time.perf_counter()
-            tp = TileProcessor(height, width, textures=True, graph=graph, device=args.device, backend="warp")
+            tp = TileProcessor(height, width, textures=True, clt=True, graph=graph, device=args.device, backend="warp")
             build_ms = 1e3 * (time.perf_counter() - start)
             with torch.inference_mode():
                 first_ms = timed_runs(lambda: tp.process(frames, 2.5), sync, 1)["median"]
@@ -215,7 +215,7 @@ def step_determinism(args) -> dict:
     runs = {}
     with torch.inference_mode():
         for graph in (False, True):
-            tp = TileProcessor(height, width, textures=True, graph=graph, device=args.device, backend="warp")
+            tp = TileProcessor(height, width, textures=True, clt=True, graph=graph, device=args.device, backend="warp")
             runs[graph] = [{n: bits(getattr(tp.process(frames, target), n)) for n in names} for _ in range(2)]
             del tp
         pipe = Pipeline(height, width, device=args.device, backend="warp")
@@ -298,7 +298,7 @@ def sanitizer_payload(device: str) -> None:
     frames = device_frames(64, 48, device)
     with torch.inference_mode():
         for graph in (False, True):
-            tp = TileProcessor(48, 64, textures=True, graph=graph, device=device, backend="warp")
+            tp = TileProcessor(48, 64, textures=True, clt=True, graph=graph, device=device, backend="warp")
             for _ in range(2):
                 tp.process(frames, 1.5)
         Pipeline(48, 64, device=device, backend="warp").process(frames)

@@ -23,7 +23,7 @@ from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConf
 from tpnet_gpu.disparity.measure import Measurer, row_chunks
 from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs
 from tpnet_gpu.disparity.volume import CostVolume, aggregate, pick
-from tpnet_gpu.processor import TileProcessor
+from tpnet_gpu.processor import TileProcessor, validate
 
 # First stage: every SPARSE-th tile in each direction sweeps the whole range at full resolution. (Binned frames
 # were cheaper but alias fine periodic textures into false matches the local pass cannot leave: 24 rendered
@@ -227,14 +227,17 @@ class DisparityEngine:
             active = active & good & ~done
         return disparity, strength, passes
 
-    def normalise(self, frames) -> torch.Tensor:
+    def normalise(self, frames, out: torch.Tensor | None = None) -> torch.Tensor:
         """Frames ``(cams, H, W)`` as float32 on the device, scaled so their mean |value| is ``REFERENCE_LEVEL``
-        (a device scalar: no host round trip); ``self.scale`` keeps the factor (1 for all-zero frames)."""
-        frames_t = frames if isinstance(frames, torch.Tensor) else torch.from_numpy(np.asarray(frames))
-        frames_t = frames_t.to(self.device, torch.float32)
-        level = torch.nan_to_num(frames_t, nan=0.0, posinf=0.0, neginf=0.0).abs().mean()
+        (a device scalar: no host round trip), written into ``out`` (default: the processor's staging buffer,
+        so a frame costs no new frame-sized array and ``load`` reads it in place) and returned (valid until
+        ``out`` is written again); ``self.scale`` keeps the factor (1 for all-zero frames)."""
+        frames_t = validate.frames(frames, self.tp.geometry)  # before the copy: it would broadcast a bad shape
+        out = self.tp.staging if out is None else out
+        out.copy_(frames_t)  # converts dtype and device
+        level = torch.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0).abs().mean()
         self.scale = torch.where(level > 0, REFERENCE_LEVEL / level, torch.ones_like(level))
-        return frames_t * self.scale
+        return out.mul_(self.scale)
 
     def run(self, frames) -> DisparityResult:
         """The whole engine on one frame ``(cams, H, W)`` (torch on any device or NumPy, any real dtype)."""

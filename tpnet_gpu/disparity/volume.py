@@ -40,8 +40,10 @@ class CostVolume:
         self.values.view(-1).scatter_reduce_(0, index.reshape(-1), source.reshape(-1), "amax")
 
     def cost(self) -> torch.Tensor:
-        """``(tiles_y, tiles_x, bins)`` matching cost 1 - correlation (clamped to [-1, 1]; 1 where not measured)."""
-        return 1.0 - torch.where(torch.isfinite(self.values), self.values, torch.zeros_like(self.values)).clamp(-1, 1)
+        """``(tiles_y, tiles_x, bins)`` matching cost 1 - correlation (clamped to [-1, 1]; 1 where not measured),
+        a new array made in place (one volume-sized array: the peak of a 5 MPix frame is in the engine's choice)."""
+        cost = torch.where(torch.isfinite(self.values), self.values, 0.0)
+        return cost.clamp_(-1, 1).neg_().add_(1.0)  # 1 - c, the same rounding
 
     def at(self, disparity: torch.Tensor) -> torch.Tensor:
         """The values ``(ty, tx)`` in the bins nearest to ``disparity (ty, tx)`` (NaN where not measured)."""
@@ -98,7 +100,7 @@ def pick(aggregated: torch.Tensor, disparities: torch.Tensor, step: float) -> tu
     denom = cm - 2 * c0 + cp
     frac = torch.where((denom > 0) & (j > 0) & (j < bins - 1), 0.5 * (cm - cp) / denom, torch.zeros_like(denom))
     d = disparities[j[..., 0]] + step * frac[..., 0].clamp(-0.5, 0.5)
-    index = torch.arange(bins, device=aggregated.device)
-    far = (index[None, None, :] - j).abs() > 2
-    margin = torch.where(far, aggregated, torch.full_like(aggregated, float("inf"))).amin(dim=-1) - c0[..., 0]
+    # the bins within 2 of the choice set to inf in one copy (not a volume of int64 distances)
+    near = (j + torch.arange(-2, 3, device=aggregated.device)).clamp(0, bins - 1)  # (H, W, 5)
+    margin = aggregated.scatter(-1, near, float("inf")).amin(dim=-1) - c0[..., 0]
     return d, margin

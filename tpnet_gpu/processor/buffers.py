@@ -51,8 +51,11 @@ class TileResult:
 
 
 # Tile rows of one texture band: the texture's per-camera scratch is 1 KiB per tile, camera and colour (pix and
-# cmp) - 1.9 GB for a 5 MPix quad frame at once, 0.16 GB per band of 16 rows.
-TEXTURE_BAND_ROWS = 16
+# cmp) - 1.9 GB for a 5 MPix quad frame at once, 61 MiB per band of 8 rows. A texturing processor without
+# ``clt=True`` also converts band by band into a band of CLT tiles (30 MiB instead of 0.9 GiB at 5 MPix) and
+# keeps the RGBA contributions of ``ring_rows`` tile rows (the band and the row above it, which the overlap-add
+# of the band's first canvas rows reads): 12 MiB instead of 306 MiB. (16 rows: 110 MiB more at 5 MPix.)
+TEXTURE_BAND_ROWS = 8
 
 
 def texture_band_tiles(tiles_y: int, tiles_x: int) -> int:
@@ -60,21 +63,35 @@ def texture_band_tiles(tiles_y: int, tiles_x: int) -> int:
     return min(TEXTURE_BAND_ROWS, tiles_y) * tiles_x
 
 
+def texture_ring_rows(tiles_y: int) -> int:
+    """Tile rows of RGBA contributions kept: one band and the row before it (all rows of a shorter frame)."""
+    return min(TEXTURE_BAND_ROWS + 1, tiles_y)
+
+
 @dataclass(frozen=True)
 class TextureBand:
     """Views of one band of tile rows ``[first, last)`` for the texture steps (all contiguous, made once).
 
-    ``clt``, ``finite``: the band's tiles; ``pix``, ``cmp``, ``weights``: their slots in the scratch. The combine
-    step reads the whole frame's ``finite`` (the neighbours' for the alpha fade) and writes the band's tiles of
-    ``tex_rgba`` from frame tile ``first * tiles_x`` on."""
+    ``clt``: the band's CLT tiles (in the whole-frame buffer, or the band buffer it is converted into);
+    ``centres``, ``active``, ``all_active``, ``finite``, ``valid``: the band's tiles of the whole-frame arrays
+    (what a band's convert reads and writes); ``pix``, ``cmp``, ``weights``: their slots in the scratch. The
+    combine step reads the whole frame's ``finite`` (the neighbours' for the alpha fade) and writes the band's
+    tiles into the ``tex_rgba`` ring (row ``ty`` in slot row ``ty % ring_rows``); the overlap-add then writes
+    canvas rows ``[y0, y0 + rows)``, which read tile rows ``first - 1`` to ``last - 1`` only."""
 
     first: int
     last: int
     clt: wp.array
+    centres: wp.array
+    active: wp.array
+    all_active: wp.array
     finite: wp.array
+    valid: wp.array
     pix: wp.array
     cmp: wp.array
     weights: wp.array
+    y0: int
+    rows: int
 
 
 class Buffers:
@@ -85,10 +102,12 @@ class Buffers:
     ``valid`` (tiles,) bool; ``clt`` (tiles * cams * colours * 4, 8, 8) or None (``keep_clt`` False); ``corr``
     (tiles * pairs, 15, 15); ``layers`` (tiles, 4, 9, 9) or None; the fused pass's ``tasks`` (tiles,) int32,
     ``count`` (1,) int32 and ``scratch`` (slots * cams * U * 4, 8, 8) (``allocate_fused``; U: the used colours).
-    Texture (``textures=True``): ``tex_rgba`` (tiles * (colours + 1), 16, 16) per-tile contributions, ``canvas``
-    (colours + 1, H + 8, W + 8), and the scratch of one band of ``TEXTURE_BAND_ROWS`` tile rows (span =
-    ``texture_band_tiles``): ``tex_pix``, ``tex_cmp`` (span * cams * colours, 16, 16), ``tex_weights`` (span *
-    cams, 16, 16, Warp only); ``texture_bands`` the views of each band (``TextureBand``).
+    Texture (``textures=True``): ``tex_rgba`` (ring_rows * tiles_x * (colours + 1), 16, 16) per-tile
+    contributions of ``texture_ring_rows`` tile rows, ``canvas`` (colours + 1, H + 8, W + 8), the scratch of one
+    band of ``TEXTURE_BAND_ROWS`` tile rows (span = ``texture_band_tiles``): ``tex_pix``, ``tex_cmp`` (span * cams
+    * colours, 16, 16), ``tex_weights`` (span * cams, 16, 16, Warp only); ``band_clt`` (span * cams * colours * 4,
+    8, 8) the band's CLT tiles, or None where the whole-frame ``clt`` is kept (the bands read it);
+    ``texture_bands`` the views of each band (``TextureBand``).
     """
 
     def __init__(self, geo: Geometry, config: CorrelationConfig, texture_config: TextureConfig | None,
@@ -184,14 +203,17 @@ class Buffers:
         side = (TILE_SIZE, TILE_SIZE)
         span = texture_band_tiles(geo.tiles_y, geo.tiles_x)
         channels = geo.colours + 1
+        self.ring_rows = texture_ring_rows(geo.tiles_y)
+        self.band_clt = self._zeros((span * geo.cams * geo.colours * 4, DTT_SIZE, DTT_SIZE)) if self.clt is None \
+            else None
         self.tex_pix = self._zeros((span * geo.cams * geo.colours, *side))
         self.tex_cmp = self._zeros((span * geo.cams * geo.colours, *side))
         self.tex_weights = self._zeros((span * geo.cams, *side))
-        self.tex_rgba = self._zeros((geo.tiles * channels, *side))
+        self.tex_rgba = self._zeros((self.ring_rows * geo.tiles_x * channels, *side))
+        margin = TILE_STRIDE // 2  # tile (0, 0)'s window starts 4 px before the frame
+        self.canvas = self._zeros((geo.colours + 1, self.canvas_rows(geo), geo.width + 2 * margin))
         self.texture_bands = [self._band(geo, first, min(first + TEXTURE_BAND_ROWS, geo.tiles_y))
                               for first in range(0, geo.tiles_y, TEXTURE_BAND_ROWS)]
-        margin = TILE_STRIDE // 2  # tile (0, 0)'s window starts 4 px before the frame
-        self.canvas = self._zeros((geo.colours + 1, geo.height + 2 * margin, geo.width + 2 * margin))
         up = self.upload
         self.tex_lpf = up(np.stack([tables.lpf(s) for s in tc.lpf_sigmas]))  # (colours, 8, 8)
         inverse = operators.inverse_axes()  # (2, 16, 8)
@@ -209,10 +231,19 @@ class Buffers:
         """The views of tile rows ``[first, last)``."""
         per_tile = geo.cams * geo.colours
         start, inner = first * geo.tiles_x, (last - first) * geo.tiles_x  # tiles
+        tiles = slice(start, start + inner)
+        clt = self.band_clt[: inner * per_tile * 4] if self.clt is None else \
+            self.clt[start * per_tile * 4 : (start + inner) * per_tile * 4]
+        # canvas row y reads tile rows y // 8 - 1 and y // 8: rows [8 first, 8 last) need rows first - 1 .. last - 1
+        end = self.canvas_rows(geo) if last == geo.tiles_y else TILE_STRIDE * last
         return TextureBand(
-            first=first, last=last,
-            clt=self.clt[start * per_tile * 4 : (start + inner) * per_tile * 4],
-            finite=self.finite[start : start + inner],
+            first=first, last=last, clt=clt, centres=self.centres[tiles], active=self.active[tiles],
+            all_active=self.all_active[tiles], finite=self.finite[tiles], valid=self.valid[tiles],
             pix=self.tex_pix[: inner * per_tile], cmp=self.tex_cmp[: inner * per_tile],
-            weights=self.tex_weights[: inner * geo.cams],
+            weights=self.tex_weights[: inner * geo.cams], y0=TILE_STRIDE * first, rows=end - TILE_STRIDE * first,
         )
+
+    @staticmethod
+    def canvas_rows(geo: Geometry) -> int:
+        """Rows of the canvas: the frame and a half tile stride each side."""
+        return geo.height + TILE_STRIDE

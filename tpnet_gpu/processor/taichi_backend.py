@@ -56,7 +56,7 @@ class TaichiBackend:
             for step in steps:
                 if step == "pad":
                     taichi_frames.pad_frames(self.frames_t if frames is None else frames, self._v(self.b.padded))
-                elif step in ("convert", "fused"):
+                elif step in ("convert", "fused", "convert_texture"):
                     getattr(self, "_" + step)(masked)
                 else:
                     getattr(self, "_" + step)()
@@ -68,12 +68,16 @@ class TaichiBackend:
         taichi_frames.ideal_tile_centres(self._v(b.disparity), self._v(b.offsets), self._v(b.centres))
 
     def _convert(self, masked: bool) -> None:
+        b = self.b
+        self._convert_tiles(b.centres, b.active if masked else b.all_active, b.clt, b.finite, b.valid)
+
+    def _convert_tiles(self, centres, active, clt, finite, valid) -> None:
+        """convert_tiles over the tiles of ``centres`` (the frame's, or one band's views)."""
         b, geo, v = self.b, self.geo, self._v
         taichi_convert.convert_tiles(
-            v(b.padded), v(b.centres), v(b.active if masked else b.all_active), v(b.masks), v(b.basis_window),
-            v(b.basis_phase), v(b.kernels),
+            v(b.padded), v(centres), v(active), v(b.masks), v(b.basis_window), v(b.basis_phase), v(b.kernels),
             b.kernel_grid[0], b.kernel_grid[1], int(b.use_kernels), geo.height, geo.width, geo.colours,
-            v(b.clt), v(b.finite), v(b.valid),
+            v(clt), v(finite), v(valid),
         )
 
     def _fused(self, masked: bool) -> None:
@@ -97,15 +101,31 @@ class TaichiBackend:
         if b.layers is not None:
             taichi_correlate.network_layers(v(b.corr), cfg.net_offset, v(b.layers))
 
-    def _texture(self) -> None:
+    def _convert_texture(self, masked: bool) -> None:
+        self._texture(convert=True, masked=masked)
+
+    def _texture(self, convert: bool = False, masked: bool = False) -> None:
+        """The Warp backend's band order (WarpBackend._texture): with ``convert``, each band converted first."""
         b, geo, tc, v = self.b, self.geo, self.texture_config, self._v
-        for band in b.texture_bands:  # one band of tile rows at a time through the scratch (Buffers)
+        bands = b.texture_bands
+
+        def convert_band(band) -> None:
+            self._convert_tiles(band.centres, band.active if masked else band.all_active, band.clt, band.finite,
+                                band.valid)
+
+        if convert:
+            convert_band(bands[0])
+        for i, band in enumerate(bands):
             taichi_texture.texture_imclt(v(band.clt), v(band.finite), geo.cams, geo.colours, v(b.tex_lpf),
                                          v(b.inv_cos), v(b.inv_sin), v(b.inv_window2), tc.scale_shot,
                                          tc.min_shot, v(band.pix), v(band.cmp))
+            if convert and i + 1 < len(bands):  # the alpha fade reads the next band's finite (Warp backend)
+                convert_band(bands[i + 1])
             taichi_texture.texture_combine(
                 v(band.pix), v(band.cmp), v(b.finite), band.first * geo.tiles_x, geo.tiles_x, geo.tiles_y,
-                geo.cams, geo.colours, v(b.offsets), v(b.tex_weights_c), v(b.channel_of_colour), tc.diff_sigma,
-                tables.TEXTURE_WEIGHT_FLOOR, int(tc.dust_remove), tc.output_gain, v(b.window2), v(b.tex_rgba),
+                b.ring_rows, geo.cams, geo.colours, v(b.offsets), v(b.tex_weights_c), v(b.channel_of_colour),
+                tc.diff_sigma, tables.TEXTURE_WEIGHT_FLOOR, int(tc.dust_remove), tc.output_gain, v(b.window2),
+                v(b.tex_rgba),
             )
-        taichi_texture.overlap_add(v(b.tex_rgba), v(b.finite), geo.tiles_x, geo.tiles_y, v(b.canvas))
+            taichi_texture.overlap_add(v(b.tex_rgba), v(b.finite), geo.tiles_x, geo.tiles_y, b.ring_rows, band.y0,
+                                       band.rows, v(b.canvas))

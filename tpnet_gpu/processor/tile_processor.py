@@ -9,11 +9,12 @@ the processor's device, overwritten by the next call (clone them to keep a frame
 
 Fused or split: ``measure`` runs the fused pass - one launch that converts and correlates each active tile (a
 task list of them) without writing the frequency-domain (CLT) tiles - unless the processor was built with
-``clt=True``: then it runs the split stages (convert, then correlate) and ``result.clt`` holds the tiles. The CLT
-buffer (~1 GB at 2592x1936 quad) exists only with ``clt=True`` or ``textures=True``; ``texture`` converts the
-tiles first when the last targets have not been converted (after a fused ``measure``), so measuring passes stay
-fused on a texturing processor. Both paths give the same correlations, layers and masks (tests compare each to
-the float64 reference); without the buffer ``result.clt`` is None.
+``clt=True``: then it runs the split stages (convert, then correlate) and ``result.clt`` holds the tiles. The
+whole-frame CLT buffer (~1 GB at 2592x1936 quad) exists only with ``clt=True``; a texturing processor without it
+converts the tiles for the texture band by band (16 tile rows) into a band-sized buffer (Buffers), so its
+``measure`` and ``process`` correlate fused. With ``clt=True``, ``texture`` converts the tiles first when the last
+targets have not been converted. Both paths give the same correlations, layers and masks (tests compare each
+to the float64 reference); without the buffer ``result.clt`` is None.
 """
 
 from __future__ import annotations
@@ -41,10 +42,10 @@ class TileProcessor:
         kernels: optional aberration kernels in CLT form, ``(cams, colours, 4, 8, 8)`` (one per camera and
             colour) or ``(cams, rows, cols, colours, 4, 8, 8)`` on the 16-px kernel grid (node n at 16 n - 8).
         config: correlation parameters.
-        textures: also make the RGBA texture image in ``process`` and ``texture`` (allocates its buffers, the CLT
-            tiles' among them: the texture converts into them; ``measure`` stays fused).
-        clt: keep the CLT tiles (``result.clt``, the ``convert``/``correlate`` stages); else ``measure`` runs the
-            fused pass (module docstring).
+        textures: also make the RGBA texture image in ``process`` and ``texture`` (allocates its buffers: one
+            band of CLT tiles the texture converts into, unless ``clt``; ``measure`` stays fused).
+        clt: keep the whole frame's CLT tiles (``result.clt``, the ``convert``/``correlate`` stages; ~1 GB at
+            5 MPix); else ``measure`` runs the fused pass (module docstring).
         texture_config: texture parameters.
         graph: record each step sequence's launches once as a Warp graph (a CUDA graph on the GPU) and replay
             it for every later call; inputs are then always staged into the processor's buffers. Default: on
@@ -90,7 +91,7 @@ class TileProcessor:
         self.texture_config = texture_config.resolved(geo.colours)
         self.graph = (self.device.is_cuda and backend == "warp") if graph is None else bool(graph)
         self._buffers = Buffers(geo, self.config, self.texture_config if self.textures else None,
-                                validate.kernels(kernels, geo), self.device, keep_clt=self.keeps_clt or self.textures)
+                                validate.kernels(kernels, geo), self.device, keep_clt=self.keeps_clt)
         if backend == "taichi":
             from tpnet_gpu.processor.taichi_backend import TaichiBackend  # noqa: PLC0415 - Taichi only when asked
 
@@ -121,6 +122,12 @@ class TileProcessor:
         """How many frames ``load`` (or ``process``/``prepare``) has taken: a caller that loaded a frame and
         measures it later can tell whether someone loaded another one in between."""
         return self._frame_count
+
+    @property
+    def staging(self) -> torch.Tensor:
+        """The ``(cams, height, width)`` float32 staging buffer ``load`` copies frames into: a caller may write a
+        frame there (e.g. scaled) and ``load`` it, which then reads it in place (no copy without graphs)."""
+        return self._buffers.frames_t
 
     @property
     def result(self) -> TileResult:
@@ -189,7 +196,7 @@ class TileProcessor:
         validate.targets(target_disparity, centres)
         self.load(frames)
         self.set_targets(target_disparity, centres=centres, active=active)
-        self._run(("convert", "correlate", "texture") if self.textures else self._pass)
+        self._run((*self._pass, self._texture_step) if self.textures else self._pass)
         return self.result
 
     @property
@@ -197,8 +204,13 @@ class TileProcessor:
         """The steps of one measurement: split when the CLT tiles are kept, else fused."""
         return ("convert", "correlate") if self.keeps_clt else ("fused",)
 
+    @property
+    def _texture_step(self) -> str:
+        """The texture from the converted whole-frame CLT tiles, or converted band by band into the band buffer."""
+        return "texture" if self.keeps_clt else "convert_texture"
+
     def _run(self, steps: tuple[str, ...]) -> None:
-        if self._ideal and ("convert" in steps or "fused" in steps):
+        if self._ideal and any(step in steps for step in ("convert", "fused", "convert_texture")):
             steps = ("centres", *steps)
         self._backend.run(steps, frames=None, masked=self._masked)
         self._converted = self._converted or "convert" in steps
@@ -230,12 +242,16 @@ class TileProcessor:
 
     def _need_clt(self, stage: str) -> None:
         if self._buffers.clt is None:
-            raise RuntimeError(f"{stage}: this processor does not keep the CLT tiles; build it with clt=True "
-                               "(or textures=True), or run fused()")
+            raise RuntimeError(f"{stage}: this processor does not keep the CLT tiles; build it with clt=True, "
+                               "or run fused()")
 
     def texture(self) -> None:
         """Stage 3: CLT tiles -> RGBA texture image (needs ``textures=True`` at construction); converts the
-        loaded frames at the current targets first unless that was the last thing done to them."""
+        loaded frames at the current targets first unless that was the last thing done to them (band by band
+        without ``clt=True``)."""
         if not self.textures:
             raise RuntimeError("texture: this processor was built without textures=True")
-        self._run(("texture",) if self._converted else ("convert", "texture"))
+        if not self.keeps_clt:
+            self._run(("convert_texture",))
+        else:
+            self._run(("texture",) if self._converted else ("convert", "texture"))

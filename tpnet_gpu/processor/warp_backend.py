@@ -87,7 +87,7 @@ class WarpBackend:
         for step in steps:
             if step == "pad":
                 self._pad(frames_t)
-            elif step in ("convert", "fused"):
+            elif step in ("convert", "fused", "convert_texture"):
                 getattr(self, "_" + step)(masked)
             else:
                 getattr(self, "_" + step)()
@@ -113,13 +113,17 @@ class WarpBackend:
                             [b.centres])
 
     def _convert(self, masked: bool) -> None:
+        b = self.b
+        self._convert_tiles(b.centres, b.active if masked else b.all_active, b.clt, b.finite, b.valid)
+
+    def _convert_tiles(self, centres, active, clt, finite, valid) -> None:
+        """convert_tiles over the tiles of ``centres`` (the frame's, or one band's views)."""
         b, geo = self.b, self.geo
-        self._tile_launch(
-            convert.convert_tiles,
-            [b.padded, b.centres, b.active if masked else b.all_active, b.masks, b.k_rows, b.n_rows, b.n_cols,
-             b.k_cols, b.kernels, b.kernel_grid[0], b.kernel_grid[1], b.use_kernels, geo.height, geo.width,
-             b.all_colours],
-            [b.clt, b.finite, b.valid],
+        self._tile_launch_n(
+            convert.convert_tiles, centres.shape[0],
+            [b.padded, centres, active, b.masks, b.k_rows, b.n_rows, b.n_cols, b.k_cols, b.kernels,
+             b.kernel_grid[0], b.kernel_grid[1], b.use_kernels, geo.height, geo.width, b.all_colours],
+            [clt, finite, valid],
         )
 
     def _correlate(self) -> None:
@@ -153,9 +157,22 @@ class WarpBackend:
         )
         self._layers()
 
-    def _texture(self) -> None:
+    def _convert_texture(self, masked: bool) -> None:
+        self._texture(convert=True, masked=masked)
+
+    def _texture(self, convert: bool = False, masked: bool = False) -> None:
+        """The texture one band of tile rows at a time through the scratch (Buffers); with ``convert``, each
+        band's CLT tiles are converted into the band buffer first (a processor without the whole-frame one)."""
         b, geo, tc = self.b, self.geo, self.texture_config
-        for band in b.texture_bands:  # one band of tile rows at a time through the scratch (Buffers)
+        bands = b.texture_bands
+
+        def convert_band(band) -> None:
+            self._convert_tiles(band.centres, band.active if masked else band.all_active, band.clt, band.finite,
+                                band.valid)
+
+        if convert:
+            convert_band(bands[0])
+        for i, band in enumerate(bands):
             self._tile_launch_n(
                 texture.texture_imclt, band.finite.shape[0],
                 [band.clt, band.finite, geo.cams, geo.colours, b.tex_lpf, b.inv_cos, b.inv_sin, b.inv_cos_t,
@@ -166,12 +183,14 @@ class WarpBackend:
                                 [band.pix, band.finite, geo.cams, geo.colours, tc.scale_shot, tc.min_shot,
                                  b.inv_window2],
                                 [band.cmp])
+            if convert and i + 1 < len(bands):  # the alpha fade reads the next band's finite; its CLT tiles
+                convert_band(bands[i + 1])  # replace this band's, already read
             self._thread_launch(
                 texture.texture_combine, (band.finite.shape[0], *b.tex_pix.shape[1:]),
-                [band.pix, band.cmp, b.finite, band.first * geo.tiles_x, geo.tiles_x, geo.tiles_y, geo.cams,
-                 geo.colours, b.offsets, b.tex_weights_c, b.channel_of_colour, tc.diff_sigma,
+                [band.pix, band.cmp, b.finite, band.first * geo.tiles_x, geo.tiles_x, geo.tiles_y, b.ring_rows,
+                 geo.cams, geo.colours, b.offsets, b.tex_weights_c, b.channel_of_colour, tc.diff_sigma,
                  tables.TEXTURE_WEIGHT_FLOOR, tc.dust_remove, tc.output_gain],
                 [band.weights, b.tex_rgba],
             )
-        self._thread_launch(texture.overlap_add, b.canvas.shape, [b.tex_rgba, b.finite, geo.tiles_x, geo.tiles_y],
-                            [b.canvas])
+            self._thread_launch(texture.overlap_add, (b.canvas.shape[0], band.rows, b.canvas.shape[2]),
+                                [b.tex_rgba, b.finite, geo.tiles_x, geo.tiles_y, b.ring_rows, band.y0], [b.canvas])
