@@ -70,6 +70,20 @@ def test_mismatching_weights_are_refused(shipped):
         Pipeline(H, W, weights=shipped["binocular"], device="cpu", config=NO_TEXTURES)
 
 
+def test_mono_frames_do_not_take_colour_trained_weights(shipped, caplog):
+    """The shipped weights were trained on colour (Bayer, green-only) correlations: a mono pipeline (ordinary
+    images, ``tpnet process LEFT RIGHT``) runs the engine alone, and refuses such weights passed to it."""
+    (shipped["binocular"].with_suffix(".json")).write_text(json.dumps(
+        {"lags": [[1.0, 0.0]], "dataset_spec": {"colour_weights": [0.0, 0.0, 1.0], "fat_zero": 1e4}}))
+    with caplog.at_level(logging.WARNING, logger="tpnet_gpu.pipeline"):
+        pipe = Pipeline(H, W, cfa=None, rig=_rig("binocular"), device="cpu", max_disparity=8.0, config=NO_TEXTURES)
+    assert pipe.weights is None and "1-colour frames" in caplog.text
+    with pytest.raises(ValueError, match=r"weights: .* were trained on frames of 3 colours; these frames have 1"):
+        Pipeline(H, W, cfa=None, rig=_rig("binocular"), weights=shipped["binocular"], device="cpu",
+                 config=NO_TEXTURES)
+    assert Pipeline(H, W, rig=_rig("binocular"), device="cpu", config=NO_TEXTURES).weights == shipped["binocular"]
+
+
 def test_a_rig_without_weights_runs_the_engine_alone(shipped, caplog):
     rig = _rig("two_quads")
     with caplog.at_level(logging.WARNING, logger="tpnet_gpu.pipeline"):

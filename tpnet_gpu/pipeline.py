@@ -111,7 +111,7 @@ class Pipeline:
         self.model = None
         self.network_tp = None
         self.layers = NetworkLayers(self.engine.rig.offsets, tp.pairs, self.device)
-        self.weights = self._weights(weights)
+        self.weights = self._weights(weights, tp.colours)
         if self.weights is not None:
             net_config = infer.correlation(self.weights)
             same = net_config.resolved(tp.colours) == tp.config
@@ -121,19 +121,26 @@ class Pipeline:
                 backend=backend)
             self.model = infer.load(self.weights, device=self.device)
 
-    def _weights(self, weights) -> Path | None:
-        """The weights for this rig's layer lags: ``weights`` if they were trained for them (else ValueError), or
-        the shipped ones that were, or None (logged)."""
+    def _weights(self, weights, colours: int) -> Path | None:
+        """The weights for this rig's layer lags and these frames' colours: ``weights`` if they were trained for
+        them (else ValueError), or the shipped ones that were, or None (logged: the engine's result)."""
         lags = [list(v) for v in self.layers.lags]
         if weights is not None:
             if not lags_match(infer.lags(weights), self.layers.lags):
                 raise ValueError(f"weights: {weights} were trained for a rig whose layers have lags "
                                  f"{[list(v) for v in infer.lags(weights)]}; this pipeline's rig has {lags} "
                                  f"(train weights for it: `tpnet dataset --rig` then `tpnet train`)")
+            trained = infer.correlation(weights).colour_weights
+            if trained is not None and len(trained) != colours:
+                raise ValueError(f"weights: {weights} were trained on frames of {len(trained)} colours; these "
+                                 f"frames have {colours} (cfa None: mono)")
             return Path(weights)
         found = infer.shipped_for(self.layers.lags)
-        if found is None:
-            log.warning("no shipped TPNET weights for this rig (layer lags %s): the disparity is the engine's", lags)
+        trained = None if found is None else infer.correlation(found).colour_weights
+        if found is None or (trained is not None and len(trained) != colours):
+            log.warning("no shipped TPNET weights for this rig (layer lags %s) and %d-colour frames: the disparity "
+                        "is the engine's", lags, colours)
+            return None
         return found
 
     def process(self, frames) -> FrameResult:
