@@ -33,7 +33,8 @@ log = logging.getLogger(__name__)
 @dataclass(frozen=True)
 class PipelineConfig:
     """``engine``: the disparity engine's settings; ``network_passes``: TPNET passes (when the pipeline has
-    weights for its rig), each re-correlating at the previous one's disparity; ``textures``: make the RGBA texture."""
+    weights for its rig), each re-correlating at the previous one's disparity; ``textures``: make the RGBA
+    texture."""
 
     engine: EngineConfig = EngineConfig()
     network_passes: int = 1
@@ -50,8 +51,7 @@ class FrameResult:
 
     Attributes:
         disparity: ``(tiles_y, tiles_x)`` final disparity, px (TPNET's where the pipeline has weights for its
-            rig, ``Pipeline.weights``, else the engine's); NaN
-            where the engine trusted no measurement.
+            rig, ``Pipeline.weights``, else the engine's); NaN where the engine trusted no measurement.
         confidence: ``(tiles_y, tiles_x)`` the engine's confidence (its final correlation peak's strength,
             scaled down on two-depth tiles; higher = surer), 0 = none.
         two_depth: ``(tiles_y, tiles_x)`` bool: the tile's window straddles two depths (its neighbours'
@@ -86,12 +86,12 @@ class Pipeline:
         weights: TPNET weights (default: the shipped ones trained for the rig's layer lags, none for a rig
             no shipped weights fit: the engine's result, logged as a warning). Weights trained for other lags
             are refused (``ValueError``).
+        device: "cpu" or "cuda" (default cuda when present).
+        backend: kernel language of the tile processors, "warp" or "taichi"; None: ``TileProcessor``'s default.
 
     Attributes:
         weights: the TPNET weights in use (a path), or None (no network: the disparity is the engine's).
         layers: the rig's ``NetworkLayers`` (its direction groups: ``layers.lags``).
-        device: "cpu" or "cuda" (default cuda when present).
-        backend: kernel language of the tile processors, "warp" or "taichi"; None: ``TileProcessor``'s default.
     """
 
     def __init__(self, height: int, width: int, *, cfa: str | None = "GRBG", rig: Rig | None = None, pairs=None,
