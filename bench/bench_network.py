@@ -1,6 +1,7 @@
 """The disparity engine and TPNET against the old sweep + LMA loop on held-out rendered scenes.
 
-    tpnet bench network [--scenes 4] [--width 640 --height 480] [--passes 3] [--weights PATH] [--json ...] [--png ...]
+    tpnet bench network [--scenes 4] [--width 640 --height 480] [--passes 3] [--weights PATH] [--rig FILE]
+                        [--json ...] [--png ...]
     python -m tpnet_gpu.bench.bench_network [same options]
 
 Scenes are rendered fresh with seeds no training scene uses (``--seed`` 10000+), the demo scene first. Methods:
@@ -10,7 +11,10 @@ and TPNET reading the layers at the engine's disparities (its first-stage answer
 further pass re-correlating at the previous pass's disparity (one row per pass count, up to ``--passes``).
 Scored per class (tpnet_gpu/evaluation.py): strict and either-surface gross, own-inlier RMSE, rmse-ref on the
 tiles the old loop gets within 1 px (the paper's protocol), tiles made gross that it had right, coverage,
-confidence ranking, tile-processor passes and seconds per frame (the engine timed warm). Table + JSON + PNG (the PNG needs matplotlib,
+confidence ranking, tile-processor passes and seconds per frame (the engine timed warm).
+``--rig FILE`` (a rig file or a shipped one, at the bench's size when ideal) renders the scenes with that rig; a rig
+other than the quad has neither the old loop nor the LMA (quad only): its methods are the engine and TPNET with the
+weights trained for its layer lags (default: the shipped ones), scored against the engine. Table + JSON + PNG (the PNG needs matplotlib,
 of the optional ``bench`` extra).
 """
 
@@ -19,15 +23,19 @@ from __future__ import annotations
 import platform
 import sys
 import time
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import torch
 
 from tpnet_gpu.baseline.estimate import BASELINE_CORRELATION, estimate, processor_correlator
+from tpnet_gpu import rigfile
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import EngineConfig
 from tpnet_gpu.disparity import DisparityEngine
 from tpnet_gpu.net import infer
+from tpnet_gpu.net.layers import QUAD_LAGS, NetworkLayers, lags_match, rig_lags
 from tpnet_gpu.processor import TileProcessor
 from tpnet_gpu.scenes import Sensor, demo_scene, random_scene, render
 
@@ -62,6 +70,7 @@ def main(argv=None) -> dict:
     report_tools.scene_arguments(parser, "network", scenes=4, width=640, height=480, seed=10000)
     parser.add_argument("--weights", default=None, help="TPNET weights (default: the shipped ones)")
     parser.add_argument("--passes", type=int, default=3, help="most network passes (re-measured at its own output)")
+    parser.add_argument("--rig", default=None, help="rig file or shipped rig name (default: the quad)")
     args = parser.parse_args(argv)
     if args.scenes < 1 or args.passes < 1:
         parser.error("--scenes, --passes: expected at least 1")
@@ -69,13 +78,26 @@ def main(argv=None) -> dict:
         common.require_extras("matplotlib")
 
     rig = Rig(width=args.width, height=args.height)
-    model = infer.load(args.weights, device=args.device)
-    base_tp = TileProcessor(rig.height, rig.width, config=BASELINE_CORRELATION, device=args.device)
+    if args.rig is not None:
+        rig = rigfile.load(args.rig)
+        rig = replace(rig, width=args.width, height=args.height, _cache={}) if rig.is_ideal() else rig
+    quad = lags_match(rig_lags(rig.offsets), QUAD_LAGS)
+    engine_names = ENGINES if quad else {ENGINE: "axis"}  # the LMA and the old loop: the quad's only
+    weights = args.weights if args.weights is not None else infer.shipped_for(rig_lags(rig.offsets))
+    if weights is None:
+        parser.error(f"--weights: no shipped TPNET weights for this rig (layer lags {rig_lags(rig.offsets)})")
+    if not lags_match(infer.lags(weights), rig_lags(rig.offsets)):
+        parser.error(f"--weights: {weights} were trained for layer lags {infer.lags(weights)}, the rig's are "
+                     f"{rig_lags(rig.offsets)}")
+    model = infer.load(weights, device=args.device)
+    base_tp = TileProcessor(rig.height, rig.width, config=BASELINE_CORRELATION, device=args.device) if quad else None
     engines = {name: DisparityEngine(rig.height, rig.width, rig=rig, config=EngineConfig(measure=measure),
-                                     device=args.device) for name, measure in ENGINES.items()}
+                                     device=args.device) for name, measure in engine_names.items()}
     network_tp = engines[ENGINE].tp
-    if infer.correlation(args.weights).resolved(network_tp.colours) != network_tp.config:
-        network_tp = TileProcessor(rig.height, rig.width, config=infer.correlation(args.weights), device=args.device)
+    layers = NetworkLayers(rig.offsets, network_tp.pairs, network_tp.torch_device)
+    if infer.correlation(weights).resolved(network_tp.colours) != network_tp.config:
+        network_tp = TileProcessor(rig.height, rig.width, camera_offsets=rig.offsets_array(), pairs=network_tp.pairs,
+                                   config=infer.correlation(weights), device=args.device)
     scenes = []
     for index in range(args.scenes):
         rng = np.random.default_rng([args.seed, index])
@@ -84,11 +106,12 @@ def main(argv=None) -> dict:
         frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
         shape = rendered.tile_disparity.shape
         estimates, confidences, costs = {}, {}, {}
-        start = time.perf_counter()
-        counted = CountingCorrelator(processor_correlator(base_tp, frames))
-        old = estimate(counted, shape)
-        estimates[OLD], confidences[OLD] = old.disparity, old.strength
-        costs[OLD] = {"seconds": time.perf_counter() - start, "tile_passes": float(counted.calls)}
+        if quad:
+            start = time.perf_counter()
+            counted = CountingCorrelator(processor_correlator(base_tp, frames))
+            old = estimate(counted, shape)
+            estimates[OLD], confidences[OLD] = old.disparity, old.strength
+            costs[OLD] = {"seconds": time.perf_counter() - start, "tile_passes": float(counted.calls)}
         for name, engine in engines.items():
             engine.run(frames)  # warm-up of this size (kernels, tables) outside the timing
             start = time.perf_counter()
@@ -103,8 +126,7 @@ def main(argv=None) -> dict:
             network_tp.load(engines[ENGINE].normalise(frames))
         start = time.perf_counter()
         for n in range(1, args.passes + 1):
-            layers = engines[ENGINE].measure_at(network_tp, target).layers
-            target = infer.infer(model, layers, target, grid=shape)
+            target = infer.infer(model, layers.of(engines[ENGINE].measure_at(network_tp, target)), target, grid=shape)
             net = target.cpu().numpy().astype(np.float64)
             net[~measured.cpu().numpy()] = np.nan  # scored on the tiles the engine measured
             estimates[pass_name(n)] = net
@@ -115,12 +137,14 @@ def main(argv=None) -> dict:
                        "spread": rendered.tile_spread, "estimates": estimates, "surfaces": rendered.tile_surfaces,
                        "confidences": confidences, "per_frame": costs})
 
-    methods = [OLD, *ENGINES] + [pass_name(n) for n in range(1, args.passes + 1)]
-    title = (f"Old sweep, the disparity engine and TPNET, {args.scenes} held-out rendered scenes of {args.width}x{args.height} "
-             f"(seeds {args.seed}+), weights {args.weights or infer.DEFAULT_WEIGHTS.name}")
+    methods = ([OLD] if quad else []) + [*engine_names] + [pass_name(n) for n in range(1, args.passes + 1)]
+    rig_text = "" if args.rig is None else f", rig {args.rig} ({rig.cams} cameras)"
+    title = (f"{'Old sweep, the' if quad else 'The'} disparity engine and TPNET, {args.scenes} held-out rendered scenes "
+             f"of {args.width}x{args.height} (seeds {args.seed}+){rig_text}, weights "
+             f"{Path(weights or infer.DEFAULT_WEIGHTS).name}")
     meta = {"bench": "network", "scenes": args.scenes, "width": args.width, "height": args.height,
-            "seed": args.seed, "passes": args.passes, "machine": platform.platform()}
-    return report_tools.publish(scenes, methods, title, OLD, meta, args.json, args.png, log=log)
+            "seed": args.seed, "passes": args.passes, "rig": args.rig, "machine": platform.platform()}
+    return report_tools.publish(scenes, methods, title, OLD if quad else ENGINE, meta, args.json, args.png, log=log)
 
 
 if __name__ == "__main__":

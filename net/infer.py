@@ -12,6 +12,7 @@ from pathlib import Path
 import torch
 
 from tpnet_gpu.config import CorrelationConfig, DatasetSpec
+from tpnet_gpu.net.layers import QUAD_LAGS, lags_match
 from tpnet_gpu.net.model import TPNet
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
@@ -19,11 +20,12 @@ DEFAULT_WEIGHTS = WEIGHTS_DIR / "tpnet_synthetic_v4.pt"
 
 
 def load(path=None, device=None) -> TPNet:
-    """A ``TPNet`` with the weights at ``path`` (default: the shipped ones), in eval mode on ``device``."""
+    """A ``TPNet`` with the weights at ``path`` (default: the shipped quad ones), in eval mode on ``device``; one
+    correlation layer per lag of its recipe (:func:`lags`)."""
     path = Path(path) if path is not None else DEFAULT_WEIGHTS
     if not path.exists():
         raise FileNotFoundError(f"{path}: no TPNET weights there (train some with `tpnet train`)")
-    model = TPNet()
+    model = TPNet(layers=len(lags(path)))
     model.load_state_dict(torch.load(path, map_location="cpu", weights_only=True))
     return model.to(device or "cpu").eval()
 
@@ -32,6 +34,22 @@ def recipe(path=None) -> dict:
     """The recipe (command, data set, seed, history) recorded beside the weights."""
     path = Path(path) if path is not None else DEFAULT_WEIGHTS
     return json.loads(path.with_suffix(".json").read_text())
+
+
+def lags(path=None) -> tuple:
+    """The layer lags ``((x, y), ...)`` the weights at ``path`` were trained for (their recipe's ``lags``, the
+    direction groups of the data set's rig); weights without a recipe, or from before rigs, are the quad's."""
+    path = Path(path) if path is not None else DEFAULT_WEIGHTS
+    if not path.with_suffix(".json").exists():
+        return QUAD_LAGS
+    return tuple(tuple(lag) for lag in recipe(path).get("lags", QUAD_LAGS))
+
+
+def shipped_for(rig_lags) -> Path | None:
+    """The shipped weights (``WEIGHTS_DIR/*.pt``) trained for these layer lags, or None: the default quad weights
+    first, then the others by name."""
+    others = sorted(p for p in WEIGHTS_DIR.glob("*.pt") if p != DEFAULT_WEIGHTS)
+    return next((p for p in [DEFAULT_WEIGHTS, *others] if p.exists() and lags_match(lags(p), rig_lags)), None)
 
 
 def correlation(path=None):
@@ -49,12 +67,12 @@ def correlation(path=None):
 
 def infer(model: TPNet, layers: torch.Tensor, target: torch.Tensor, grid: tuple[int, int] | None = None,
           active: torch.Tensor | None = None) -> torch.Tensor:
-    """Predicted disparity ``(tiles_y, tiles_x)`` from network layers ``(tiles, 4, 9, 9)`` or ``(ty, tx, 4, 9, 9)``
-    (e.g. ``TileResult.layers``) measured at ``target (ty, tx)``; computed on the layers' device, no copies
-    (the tiles axis is viewed as the grid)."""
+    """Predicted disparity ``(tiles_y, tiles_x)`` from network layers ``(tiles, G, 9, 9)`` or ``(ty, tx, G, 9, 9)``
+    (e.g. ``TileResult.layers``, ``NetworkLayers``) measured at ``target (ty, tx)``; computed on the layers' device,
+    no copies (the tiles axis is viewed as the grid)."""
     if layers.dim() == 4:
         if grid is None:
-            raise ValueError("grid: expected (tiles_y, tiles_x) for layers of shape (tiles, 4, 9, 9), got None")
+            raise ValueError("grid: expected (tiles_y, tiles_x) for layers of shape (tiles, G, 9, 9), got None")
         layers = layers.view(grid[0], grid[1], *layers.shape[1:])
     with torch.no_grad():
         return target + model.forward_frame(layers, target, active=active)

@@ -33,8 +33,8 @@ RING_OFFSETS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1
 RING_CLUSTER_INDEX = tuple((dy + 2) * 5 + (dx + 2) for dy, dx in RING_OFFSETS)
 RING_WEIGHTS = tuple(DIAGONAL_WEIGHT if dy and dx else 1.0 for dy, dx in RING_OFFSETS)
 WEIGHTS_MODES = ("as_coded", "isotropic")
-CORR_SHAPE = (4, 9, 9)
-FIRST_LAYER_INPUTS = 325
+CORR_LAYERS = 4  # the quad's correlation layers (a rig's direction groups, tpnet_gpu.net.layers)
+CORR_SIDE = 9  # each layer 9x9
 
 
 # ---------------------------------------------------------------------------------------------- checks
@@ -182,29 +182,32 @@ def mirror_loss_frame(pred: Tensor, gt: Tensor, gt_strength: Tensor, *, clip: fl
 
 
 # ---------------------------------------------------------------------------------------- weights loss
-def weights_loss(first_layer_weight: Tensor, *, mode: str = "as_coded", zero_borders: bool = True) -> Tensor:
+def weights_loss(first_layer_weight: Tensor, *, mode: str = "as_coded", zero_borders: bool = True,
+                 layers: int = CORR_LAYERS) -> Tensor:
     """Laplacian ("smooth weights") regulariser W of stage 1's first layer (network.md §2, ``weightsLoss``).
 
-    Each output unit's 324 correlation weights are viewed as 4 maps 9x9, padded by 1 (zeros, or edge
-    replicate when ``zero_borders`` is False), and compared with their neighbour average:
+    Each output unit's ``81 G`` correlation weights (G = ``layers``) are viewed as G maps 9x9, padded by 1 (zeros, or
+    edge replicate when ``zero_borders`` is False), and compared with their neighbour average:
 
     .. math::
         \\text{diff} = w - (a S_\\text{ortho} + b S_\\text{diag}), \\quad a = 1/6.8, \\; b = 0.7/6.8, \\quad
-        W_\\text{loss} = \\frac{\\operatorname{mean}_{4 \\cdot 81 \\cdot O}(\\text{diff}^2)}
-                              {\\operatorname{mean}_{325 \\cdot O}(W^2)}
+        W_\\text{loss} = \\frac{\\operatorname{mean}_{G \\cdot 81 \\cdot O}(\\text{diff}^2)}
+                              {\\operatorname{mean}_{I \\cdot O}(W^2)}
 
     ``S_diag`` = sum of the 4 diagonal neighbours; ``S_ortho`` = ``2 (left + right)`` in ``"as_coded"`` mode
     (the reference's bug: up/down never used) or ``left + right + up + down`` in ``"isotropic"`` mode. The
-    denominator averages over all first-layer weights, the target-disparity column included, so the loss is
-    scale-invariant (0 for all-zero weights).
+    denominator averages over all ``I`` first-layer weights, the target-disparity column (and any other input
+    after the layers) included, so the loss is scale-invariant (0 for all-zero weights).
 
-    Convention: ``first_layer_weight`` is ``nn.Linear``'s ``(out, in)`` = ``(O, 325)``, inputs
-    ``[layer*81 + row*9 + col]`` then the target (TF stores ``[in, out]``); row = up/down, col = left/right.
+    Convention: ``first_layer_weight`` is ``nn.Linear``'s ``(out, in)`` = ``(O, I)``, inputs
+    ``[layer*81 + row*9 + col]`` for the G layers first (columns ``0 .. 81 G - 1``), then the target and any other
+    inputs (TF stores ``[in, out]``); row = up/down, col = left/right.
 
     Args:
-        first_layer_weight: :math:`(O, 325)`.
+        first_layer_weight: :math:`(O, I)`, ``I > 81 G`` (the quad's TPNET: ``(256, 325)``).
         mode: ``"as_coded"`` (default, parity) or ``"isotropic"``.
         zero_borders: zero padding (default, ``WBORDERS_ZERO``) or edge replicate.
+        layers: G, the correlation layers the first inputs hold (default 4, the quad's; ``TPNet.layers``).
 
     Returns:
         Scalar W_loss.
@@ -213,11 +216,15 @@ def weights_loss(first_layer_weight: Tensor, *, mode: str = "as_coded", zero_bor
     if not isinstance(w, Tensor) or not w.is_floating_point():
         raise TypeError(f"first_layer_weight: expected a floating-point tensor, got "
                         f"{w.dtype if isinstance(w, Tensor) else type(w).__name__}")
-    if w.dim() != 2 or w.shape[1] != FIRST_LAYER_INPUTS:
-        raise ValueError(f"first_layer_weight: expected shape (out, {FIRST_LAYER_INPUTS}), got {tuple(w.shape)}")
+    if isinstance(layers, bool) or not isinstance(layers, int) or layers < 1:
+        raise ValueError(f"layers: expected a positive number of correlation layers, got {layers!r}")
+    cells = layers * CORR_SIDE * CORR_SIDE
+    if w.dim() != 2 or w.shape[1] <= cells:
+        raise ValueError(f"first_layer_weight: expected shape (out, > {cells}) for {layers} layers and the target, "
+                         f"got {tuple(w.shape)}")
     if mode not in WEIGHTS_MODES:
         raise ValueError(f"mode: expected one of {WEIGHTS_MODES}, got {mode!r}")
-    maps = w[:, :-1].reshape(w.shape[0], *CORR_SHAPE)  # (O, 4, 9, 9)
+    maps = w[:, :cells].reshape(w.shape[0], layers, CORR_SIDE, CORR_SIDE)  # (O, G, 9, 9): the layers' columns
     if zero_borders:
         p = F.pad(maps, (1, 1, 1, 1))
     else:
@@ -247,7 +254,7 @@ def total_loss(residual: Tensor, target: Tensor, gt: Tensor, gt_strength: Tensor
                weights_lambda: float = WEIGHTS_LAMBDA, mirror_clip: float = MIRROR_CLIP,
                weights_mode: str = "as_coded", zero_borders: bool = True, tile_weight: Tensor | None = None,
                conf_offset: float = CONF_OFFSET, conf_pwr: float = CONF_PWR, disp_wmin: float = DISP_WMIN,
-               disp_wmax: float = DISP_WMAX) -> LossTerms:
+               disp_wmax: float = DISP_WMAX, layers: int = CORR_LAYERS) -> LossTerms:
     """Total training loss (network.md §5.3):
 
     .. math::
@@ -265,7 +272,8 @@ def total_loss(residual: Tensor, target: Tensor, gt: Tensor, gt_strength: Tensor
       the rest :math:`(ty, tx)`, no neighbours (S via :func:`mirror_loss_frame`).
 
     Args:
-        first_layer_weight: :math:`(O, 325)` (``TPNet.first_layer_weight``).
+        first_layer_weight: :math:`(O, I)` (``TPNet.first_layer_weight``; the quad's ``(256, 325)``).
+        layers: G, the correlation layers the weight reads first (``TPNet.layers``), for W.
         tile_weight: optional extra per-tile weights for G (shape of ``target``).
         Other keywords: see :func:`main_loss`, :func:`mirror_loss`, :func:`weights_loss`.
 
@@ -300,6 +308,6 @@ def total_loss(residual: Tensor, target: Tensor, gt: Tensor, gt_strength: Tensor
         mirror = mirror_loss(pred[..., 0], gt, gt_strength, neighbour_gt, neighbour_strength, clip=mirror_clip)
     else:
         mirror = mirror_loss_frame(pred[..., 0], gt, gt_strength, clip=mirror_clip)
-    weights = weights_loss(first_layer_weight, mode=weights_mode, zero_borders=zero_borders)
+    weights = weights_loss(first_layer_weight, mode=weights_mode, zero_borders=zero_borders, layers=layers)
     total = (pi * main).sum() + mirror_lambda * mirror + weights_lambda * weights
     return LossTerms(total, main, mirror, weights)

@@ -38,10 +38,16 @@ from torch import Tensor, nn
 from tpnet_gpu.net.checks import check_like, check_tensor, clone_list, frame_grid
 from tpnet_gpu.net.neighbours import CLUSTER_RADIUS, frame_relative_targets, relative_targets
 
-CORR_LAYERS = 4  # hor, vert, diag-main, diag-other
+CORR_LAYERS = 4  # the quad's layers: hor, vert, diag-main, diag-other (other rigs: one per direction group)
 CORR_SIZE = 9  # 9x9 crop per layer
-CORR_INPUTS = CORR_LAYERS * CORR_SIZE * CORR_SIZE  # 324
-TILE_INPUTS = CORR_INPUTS + 1  # + target disparity = 325
+CORR_CELLS = CORR_SIZE * CORR_SIZE  # 81 inputs per layer
+
+
+def tile_input_count(layers: int = CORR_LAYERS) -> int:
+    """Stage-1 inputs of a tile with ``layers`` correlation layers: ``layers * 81`` + the target (quad: 325)."""
+    return layers * CORR_CELLS + 1
+
+
 CLUSTER_SIDE = 2 * CLUSTER_RADIUS + 1  # 5
 CLUSTER_TILES = CLUSTER_SIDE * CLUSTER_SIDE  # 25
 CENTRE = CLUSTER_TILES // 2  # 12
@@ -54,17 +60,19 @@ Layer = tuple[Tensor, Tensor]  # (weight (out, in), bias (out,)) as in nn.Linear
 
 
 # ---------------------------------------------------------------------------------------------- checks
-def _check_layers(stage1: Sequence[Layer], stage2: Sequence[Layer]) -> None:
+def _check_layers(stage1: Sequence[Layer], stage2: Sequence[Layer]) -> int:
     if len(stage1) < 1 or len(stage2) < 1:
         raise ValueError(f"stage1/stage2: expected at least one layer each, got {len(stage1)} and {len(stage2)}")
-    if stage1[0][0].shape[1] != TILE_INPUTS:
-        raise ValueError(f"stage1: expected a first layer with {TILE_INPUTS} inputs, got {stage1[0][0].shape[1]}")
+    inputs = stage1[0][0].shape[1]
+    if inputs < tile_input_count(1) or (inputs - 1) % CORR_CELLS:
+        raise ValueError(f"stage1: expected a first layer of G*81 + 1 inputs (quad: 325), got {inputs}")
     features = stage1[-1][0].shape[0]
     if stage2[0][0].shape[1] != CLUSTER_TILES * (features + 1):
         raise ValueError(f"stage2: expected a first layer with {CLUSTER_TILES}*{features} + {CLUSTER_TILES} inputs, "
                          f"got {stage2[0][0].shape[1]}")
     if stage2[-1][0].shape[0] != 1:
         raise ValueError(f"stage2: expected a last layer with 1 output, got {stage2[-1][0].shape[0]}")
+    return (inputs - 1) // CORR_CELLS  # G, the correlation layers stage 1 reads
 
 
 # ----------------------------------------------------------------------------------------- functional
@@ -72,24 +80,24 @@ def tile_inputs(layers: Tensor, target: Tensor) -> Tensor:
     """Stage-1 input vectors of tiles: flattened correlation layers then target disparity, NaN -> 0.
 
     Args:
-        layers: :math:`(..., 4, 9, 9)` correlation layers ``[hor, vert, diag-main, diag-other]``.
+        layers: :math:`(..., G, 9, 9)` correlation layers (the quad's ``[hor, vert, diag-main, diag-other]``).
         target: :math:`(...)` target disparities (px), same leading shape, dtype and device.
 
     Returns:
-        :math:`(..., 325)` with ``[layer*81 + row*9 + col]`` then the target at index 324.
+        :math:`(..., G \\cdot 81 + 1)` with ``[layer*81 + row*9 + col]`` then the target (index 324 for G = 4).
 
     >>> tile_inputs(torch.zeros(2, 25, 4, 9, 9), torch.ones(2, 25)).shape
     torch.Size([2, 25, 325])
     """
     check_tensor("layers", layers)
     check_tensor("target", target)
-    if layers.dim() < 3 or tuple(layers.shape[-3:]) != (CORR_LAYERS, CORR_SIZE, CORR_SIZE):
-        raise ValueError(f"layers: expected shape (..., 4, 9, 9), got {tuple(layers.shape)}")
+    if layers.dim() < 3 or tuple(layers.shape[-2:]) != (CORR_SIZE, CORR_SIZE):
+        raise ValueError(f"layers: expected shape (..., G, 9, 9), got {tuple(layers.shape)}")
     if target.shape != layers.shape[:-3]:
         raise ValueError(f"target: expected shape {tuple(layers.shape[:-3])} (the leading shape of layers), "
                          f"got {tuple(target.shape)}")
     check_like("target", target, layers, "layers")
-    x = torch.cat([layers.reshape(*layers.shape[:-3], CORR_INPUTS), target.unsqueeze(-1)], dim=-1)
+    x = torch.cat([layers.flatten(-3), target.unsqueeze(-1)], dim=-1)
     return x.masked_fill_(x.isnan(), 0.0)  # in place: x is cat's new tensor
 
 
@@ -184,8 +192,8 @@ def clusters_residual(x: Tensor, stage1: Sequence[Layer], stage2: Sequence[Layer
     """
     _check_layers(stage1, stage2)
     check_tensor("x", x)
-    if x.dim() != 3 or tuple(x.shape[1:]) != (CLUSTER_TILES, TILE_INPUTS):
-        raise ValueError(f"x: expected shape (B, {CLUSTER_TILES}, {TILE_INPUTS}), got {tuple(x.shape)}")
+    if x.dim() != 3 or tuple(x.shape[1:]) != (CLUSTER_TILES, stage1[0][0].shape[1]):
+        raise ValueError(f"x: expected shape (B, {CLUSTER_TILES}, {stage1[0][0].shape[1]}), got {tuple(x.shape)}")
     check_like("x", x, stage1[0][0], "the parameters")
     features = stage1_features(x.masked_fill(x.isnan(), 0.0), stage1)  # (B, 25, F)
     relative = relative_targets(x[..., -1], x[:, CENTRE, -1:])  # (B, 25), from the targets before NaN -> 0
@@ -221,7 +229,8 @@ def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stag
     """Whole-frame form: residual disparity of every tile, by convolutions with the cluster form's weights.
 
     Args:
-        layers: :math:`(ty, tx, 4, 9, 9)`, or :math:`(ty \\cdot tx, 4, 9, 9)` (row-major tiles) with ``grid``.
+        layers: :math:`(ty, tx, G, 9, 9)`, or :math:`(ty \\cdot tx, G, 9, 9)` (row-major tiles) with ``grid``;
+            G = the layers the weights read (the quad's 4).
         target: :math:`(ty, tx)` (or :math:`(ty \\cdot tx)` with ``grid``) target disparities; NaN -> 0.
         stage1, stage2: ``(weight, bias)`` pairs (see :class:`TPNet`).
         grid: ``(ty, tx)``, required for tile-major ``layers``.
@@ -237,12 +246,12 @@ def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stag
         TypeError / ValueError: bad shapes, dtypes (inputs must have the parameters' dtype, ``active`` bool),
         devices that differ, or a bad ``clone``.
     """
-    _check_layers(stage1, stage2)
+    g = _check_layers(stage1, stage2)
     clones, single = clone_list(clone, len(CLONE_RADII))
-    tile_shape = (CORR_LAYERS, CORR_SIZE, CORR_SIZE)
+    tile_shape = (g, CORR_SIZE, CORR_SIZE)
     ty, tx = frame_grid(layers, target, active, grid, tile_shape, stage1[0][0])
 
-    x = tile_inputs(layers.reshape(ty, tx, *tile_shape), target.reshape(ty, tx))  # (ty, tx, 325)
+    x = tile_inputs(layers.reshape(ty, tx, *tile_shape), target.reshape(ty, tx))  # (ty, tx, G*81 + 1)
     features = stage1_features(x, stage1)  # (ty, tx, F): stage 1 as a matmul over all tiles (1x1 conv)
     if active is not None:
         features = torch.where(active.unsqueeze(-1), features, torch.zeros_like(features))
@@ -279,6 +288,7 @@ class TPNet(nn.Module):
     """TPNET with both forms (cluster and whole-frame) on one set of parameters.
 
     Args:
+        layers: correlation layers G per tile, a rig's direction groups (default 4, the quad's): G*81 + 1 inputs.
         stage1_widths: stage-1 layer widths, default ``(256, 128, 32)`` (``NET_ARCH1 = 13``).
         stage2_widths: stage-2 hidden widths, default ``(256, 64, 32, 16)`` (``NET_ARCH2 = 9``); an output
             layer ``16 -> 1`` follows.
@@ -288,8 +298,8 @@ class TPNet(nn.Module):
     + 25 x 256 relative-target weights).
 
     Shape:
-        - :meth:`forward_clusters` (= ``forward``): :math:`(B, 25, 325) \\to (B, 3)`.
-        - :meth:`forward_frame`: :math:`(ty, tx, 4, 9, 9), (ty, tx) \\to (ty, tx)`.
+        - :meth:`forward_clusters` (= ``forward``): :math:`(B, 25, G \\cdot 81 + 1) \\to (B, 3)` (quad: 325).
+        - :meth:`forward_frame`: :math:`(ty, tx, G, 9, 9), (ty, tx) \\to (ty, tx)`.
 
     >>> net = TPNet()
     >>> net(torch.zeros(2, 25, 325)).shape
@@ -299,15 +309,18 @@ class TPNet(nn.Module):
     """
 
     def __init__(self, stage1_widths: Sequence[int] = STAGE1_WIDTHS,
-                 stage2_widths: Sequence[int] = STAGE2_WIDTHS) -> None:
+                 stage2_widths: Sequence[int] = STAGE2_WIDTHS, *, layers: int = CORR_LAYERS) -> None:
         super().__init__()
+        if isinstance(layers, bool) or not isinstance(layers, int) or layers < 1:
+            raise ValueError(f"layers: expected a positive number of correlation layers, got {layers!r}")
+        self.layers = layers
         for name, widths in (("stage1_widths", stage1_widths), ("stage2_widths", stage2_widths)):
             if (not isinstance(widths, Sequence) or not widths
                     or not all(isinstance(w, int) and not isinstance(w, bool) and w > 0 for w in widths)):
                 raise ValueError(f"{name}: expected a non-empty sequence of positive ints, got {widths!r}")
         self.stage1_widths = tuple(stage1_widths)
         self.stage2_widths = tuple(stage2_widths)
-        s1 = (TILE_INPUTS, *self.stage1_widths)
+        s1 = (tile_input_count(layers), *self.stage1_widths)
         s2 = (CLUSTER_TILES * (self.stage1_widths[-1] + 1), *self.stage2_widths, 1)
         self.stage1 = nn.ModuleList(nn.Linear(a, b) for a, b in zip(s1[:-1], s1[1:]))
         self.stage2 = nn.ModuleList(nn.Linear(a, b) for a, b in zip(s2[:-1], s2[1:]))
@@ -330,11 +343,11 @@ class TPNet(nn.Module):
             nn.init.zeros_(layer.bias)
 
     def extra_repr(self) -> str:
-        return f"stage1_widths={self.stage1_widths}, stage2_widths={self.stage2_widths}"
+        return f"layers={self.layers}, stage1_widths={self.stage1_widths}, stage2_widths={self.stage2_widths}"
 
     @property
     def first_layer_weight(self) -> Tensor:
-        """Stage 1's first weight :math:`(256, 325)`, for :func:`tpnet_gpu.net.losses.weights_loss`."""
+        """Stage 1's first weight :math:`(256, G \\cdot 81 + 1)` (quad: 325), for ``losses.weights_loss``."""
         return self.stage1[0].weight
 
     def _params(self) -> tuple[list[Layer], list[Layer]]:

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from tpnet_gpu.config import TrainConfig  # noqa: F401 - re-exported: the training settings live in config
+from tpnet_gpu.net.layers import QUAD_LAGS, lags_match, rig_lags
 from tpnet_gpu.net.losses import main_loss, mirror_loss_frame, weights_loss
 from tpnet_gpu.net.model import TPNet
 
@@ -138,34 +139,46 @@ def evaluate(model: TPNet, samples: list[dict], *, max_offset: float = 2.0, min_
     return {"tiles": int(net.numel()), "rmse_network": rmse(net), "rmse_target": rmse(tgt)}
 
 
+def data_lags(manifest: dict) -> tuple:
+    """The layer lags of a data set (its manifest's ``lags``; data sets from before rigs: the quad's)."""
+    return tuple(tuple(lag) for lag in manifest.get("lags", QUAD_LAGS))
+
+
 def train(data_folder, out_path, config: TrainConfig = TrainConfig(), *, checkpoint=None, progress: bool = True,
-          log=print, stop_after: int | None = None, device: str = "cpu") -> dict:
+          log=print, stop_after: int | None = None, device: str = "cpu", rig=None) -> dict:
     """Train from scratch, or resume from ``checkpoint`` (a path written by this function); writes the final
     weights (state dict + recipe JSON beside it) to ``out_path``. ``stop_after`` ends the run after that
     epoch as an interruption would (the checkpoint then resumes it). ``device``: where the data and the model
-    live (runs are bit-reproducible on the CPU). Returns the history."""
+    live (runs are bit-reproducible on the CPU). The network has one layer per direction group of the data
+    set's rig; ``rig`` (a ``Rig``), when given, must have the data set's layer lags. Returns the history."""
     previous = torch.are_deterministic_algorithms_enabled()
     torch.use_deterministic_algorithms(True, warn_only=str(device) != "cpu")  # CUDA: some ops lack one
     try:
         return _train(data_folder, out_path, config, checkpoint=checkpoint, progress=progress, log=log,
-                      stop_after=stop_after, device=device)
+                      stop_after=stop_after, device=device, rig=rig)
     finally:
         torch.use_deterministic_algorithms(previous)
 
 
-def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: bool, log, stop_after, device) -> dict:
+def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: bool, log, stop_after, device,
+           rig) -> dict:
     from tqdm import tqdm  # noqa: PLC0415
 
     from tpnet_gpu import dataset  # noqa: PLC0415
 
     torch.manual_seed(config.seed)
     manifest = json.loads((Path(data_folder) / "manifest.json").read_text())
+    lags = data_lags(manifest)
+    if rig is not None and not lags_match(rig_lags(rig.offsets), lags):
+        raise ValueError(f"rig: the data set {data_folder} was rendered with a rig of layer lags "
+                         f"{[list(v) for v in lags]}; the given rig's are {[list(v) for v in rig_lags(rig.offsets)]} "
+                         f"(train it on a data set of that rig, `tpnet dataset --rig`)")
     train_chunks = dataset.load(data_folder, "train")
     train_samples = frame_samples(train_chunks, config.variants, device)
     test_samples = frame_samples(dataset.load(data_folder, "test"), ("heuristic",), device)
     if not train_samples:
         raise ValueError(f"{data_folder}: the data set has no training scenes")
-    model = TPNet()
+    model = TPNet(layers=len(lags))
     if config.init is not None:  # fine-tuning: start from these weights (a checkpoint still takes precedence)
         if not Path(config.init).exists():
             raise FileNotFoundError(f"init: {config.init}: no weights there")
@@ -185,8 +198,8 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
     n_samples = len(train_samples) + (len(train_chunks) if config.pass_every is not None else 0)
     if config.pass_every is not None:
         spec = dataset.DatasetSpec(**{k: tuple(v) if isinstance(v, list) else v for k, v in manifest["spec"].items()})
-        engine, processor = dataset.measurers(spec, device)
-        measure = lambda chunk, t: dataset.remeasure(chunk, t, engine, processor)  # noqa: E731
+        measurers = dataset.measurers(spec, device)
+        measure = lambda chunk, t: dataset.remeasure(chunk, t, *measurers)  # noqa: E731
         if pass_targets is not None:  # resumed between refreshes: the same pass samples as the unbroken run
             refresh_passes(model, train_samples, train_chunks, measure, pass_targets)
     rng = np.random.default_rng(config.seed)
@@ -206,7 +219,7 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
             batch = [train_samples[i] for i in order[first : first + config.batch]]
             weights = {**dict(zip(config.variants, config.variant_weights)), "pass": 1.0}
             loss = sum(weights[s["variant"]] * sample_loss(model, s, config) for s in batch) / len(batch)
-            loss = loss + config.weights_lambda * weights_loss(model.stage1[0].weight, mode=config.w_mode)
+            loss = loss + config.weights_lambda * weights_loss(model.stage1[0].weight, mode=config.w_mode, layers=model.layers)
             loss.backward()
             optimiser.step()
             total += float(loss.detach()) * len(batch)
@@ -218,19 +231,33 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
             checkpoint.parent.mkdir(parents=True, exist_ok=True)
             torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch + 1,
                         "history": history, "config": asdict(config), "pass_targets": pass_targets}, checkpoint)
-    recipe = {"command": f"tpnet dataset {data_folder} --scenes {manifest['spec']['scenes']} && "
-                         f"tpnet train {data_folder} --epochs {config.epochs} --batch {config.batch} --seed {config.seed} "
+    rig_arg = "" if manifest["spec"].get("rig") is None else f" --rig {_rig_argument(manifest['spec']['rig'])}"
+    recipe = {"command": f"tpnet dataset {data_folder} --scenes {manifest['spec']['scenes']}{rig_arg} && "
+                         f"tpnet train {data_folder}{rig_arg} --epochs {config.epochs} --batch {config.batch} "
+                         f"--seed {config.seed} "
                          f"--error-scale {config.error_scale or 0} --random-weight "
                          f"{dict(zip(config.variants, config.variant_weights)).get('random', 1.0)}"
                          + (f" --init {config.init} --lr-from {config.lr_from}" if config.init else "")
                          + (f" --pass-every {config.pass_every}" if config.pass_every else ""),
               "config": asdict(config), "data": str(data_folder), "dataset_spec": manifest["spec"],
-              "history": history}
+              "rig": manifest["spec"].get("rig"), "lags": [list(lag) for lag in lags], "history": history}
     if config.init is not None:  # the recipe of the weights this run started from, so the chain is on record
         init_recipe = Path(config.init).with_suffix(".json")
         recipe["init_recipe"] = json.loads(init_recipe.read_text()) if init_recipe.exists() else None
     save_weights(model, out_path, recipe)
     return {"history": history}
+
+
+def _rig_argument(rig: dict) -> str:
+    """``--rig`` for a data set's rig: the shipped example it is (at any size, when ideal), else the recipe's."""
+    from tpnet_gpu import rigfile  # noqa: PLC0415
+
+    size = ("width", "height")
+    for name, path in rigfile.examples().items():
+        example = rigfile.rig_to_dict(rigfile.read_rig(path))
+        if {k: v for k, v in example.items() if k not in size} == {k: v for k, v in rig.items() if k not in size}:
+            return name
+    return "RIG.json (the recipe's \"rig\", written as a rig file)"
 
 
 def save_weights(model: TPNet, path, recipe: dict) -> Path:

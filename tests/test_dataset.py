@@ -48,9 +48,11 @@ def test_chunk_contents(built):
 def test_build_resumes_and_rebuilds_identically(built, tmp_path):
     first = dataset.load(built, "test")[0]
     from tpnet_gpu.disparity import DisparityEngine
+    from tpnet_gpu.net.layers import NetworkLayers
 
     engine = DisparityEngine(SPEC.height, SPEC.width, device="cpu")
-    again = dataset.build_scene(int(first["scene"]), SPEC, engine, engine.tp)
+    layers = NetworkLayers(engine.rig.offsets, engine.tp.pairs, "cpu")
+    again = dataset.build_scene(int(first["scene"]), SPEC, engine, engine.tp, layers)
     np.testing.assert_array_equal(again["gt_disparity"], first["gt_disparity"])
     for variant in SPEC.variants():  # deterministic per seed; the layers are the processor's at the targets
         np.testing.assert_array_equal(again[f"layers_{variant}"], first[f"layers_{variant}"])
@@ -63,8 +65,8 @@ def test_stored_raws_re_measure_to_the_stored_layers(built):
     chunk = dataset.load(built, "train")[0]
     assert chunk["raws"].shape == (4, SPEC.height, SPEC.width) and chunk["raws"].dtype == np.uint16
     assert chunk["gt_surfaces"].shape[:2] == chunk["gt_disparity"].shape
-    engine, processor = dataset.measurers(SPEC, "cpu")
-    layers = dataset.remeasure(chunk, chunk["target_near0"], engine, processor)
+    measurers = dataset.measurers(SPEC, "cpu")
+    layers = dataset.remeasure(chunk, chunk["target_near0"], *measurers)
     np.testing.assert_array_equal(layers, chunk["layers_near0"])
     measured = chunk["measured"]
     assert measured.dtype == bool and measured.any()
@@ -90,3 +92,52 @@ def test_bad_split_and_missing_manifest(tmp_path):
         dataset.load(tmp_path, "val")
     with pytest.raises(FileNotFoundError, match="no data set manifest"):
         dataset.load(tmp_path, "train")
+
+
+@pytest.fixture(scope="module")
+def binocular(tmp_path_factory):
+    """A two-scene data set of the shipped binocular rig, built through the CLI (``tpnet dataset --rig``)."""
+    from tpnet_gpu import cli  # noqa: PLC0415
+
+    folder = tmp_path_factory.mktemp("bino")
+    assert cli.main(["dataset", str(folder), "--rig", "binocular", "--scenes", "2", "--width", "64", "--height", "48",
+                     "--supersample", "1", "--test-fraction", "0.5", "--seed", "4", "--device", "cpu"]) == 0
+    return folder
+
+
+def test_dataset_rig_goes_in_the_manifest(binocular):
+    from tpnet_gpu import rigfile  # noqa: PLC0415
+
+    manifest = json.loads((binocular / "manifest.json").read_text())
+    assert manifest["lags"] == [[1.0, 0.0]]
+    assert manifest["spec"]["rig"] == rigfile.rig_to_dict(rigfile.load("binocular"))
+    rig = dataset.spec_rig(DatasetSpec(**manifest["spec"]))
+    assert (rig.width, rig.height, rig.offsets) == (64, 48, ((-0.5, 0.0), (0.5, 0.0)))  # ideal: the spec's size
+    assert dataset.spec_rig(SPEC).offsets == ((-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5))  # None: the quad
+
+
+def test_binocular_layers_are_the_pairs_correlation(binocular):
+    """Oracle: a fresh tile processor of the two cameras on the stored raw frames, scaled as the engine scales
+    them: the one layer is the centre 9x9 of the pair's correlation at the stored targets (float16)."""
+    from tpnet_gpu.disparity.engine import REFERENCE_LEVEL  # noqa: PLC0415
+    from tpnet_gpu.processor import TileProcessor  # noqa: PLC0415
+
+    chunk = dataset.load(binocular, "train")[0]
+    assert chunk["raws"].shape == (2, 48, 64) and chunk["layers_random"].shape == (6, 8, 1, 9, 9)
+    frames = chunk["raws"].astype(np.float32) - chunk["black_level"]
+    frames = frames * np.float32(REFERENCE_LEVEL / np.abs(frames).mean())
+    tp = TileProcessor(48, 64, camera_offsets=((-0.5, 0.0), (0.5, 0.0)), pairs=((0, 1),), config=SPEC.correlation())
+    corr = tp.process(frames, chunk["target_random"]).corr.numpy()
+    want = corr[:, 0, 3:12, 3:12].reshape(6, 8, 1, 9, 9).astype(np.float16)
+    np.testing.assert_allclose(chunk["layers_random"].astype(np.float32), want.astype(np.float32), rtol=2e-3,
+                               atol=2e-4)  # the engine's scale is a float32 device scalar: float16 rounding apart
+
+
+def test_calibrated_rig_of_another_size_is_refused():
+    from tpnet_gpu import rigfile  # noqa: PLC0415
+
+    rig = rigfile.rig_to_dict(rigfile.load("binocular"))
+    rig["distortion"] = [0.01] + [0.0] * 6
+    with pytest.raises(ValueError, match="spec.rig: expected a calibrated rig of the data set's size 64x48, "
+                                         "got 2592x1936"):
+        dataset.spec_rig(DatasetSpec(width=64, height=48, rig=rig))

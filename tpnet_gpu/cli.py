@@ -141,8 +141,13 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 def _cmd_dataset(args: argparse.Namespace) -> int:
     from tpnet_gpu.dataset import DatasetSpec, build
 
+    rig = None
+    if args.rig is not None:
+        from tpnet_gpu import rigfile  # noqa: PLC0415
+
+        rig = rigfile.rig_to_dict(rigfile.load(args.rig))
     spec = DatasetSpec(scenes=args.scenes, width=args.width, height=args.height, test_fraction=args.test_fraction,
-                       seed=args.seed, supersample=args.supersample)
+                       seed=args.seed, supersample=args.supersample, rig=rig)
     start = time.perf_counter()
     folder = build(args.out, spec, device=args.device)
     print(f"data set of {spec.scenes} scenes ({spec.width}x{spec.height}) in {time.perf_counter() - start:.0f} s "
@@ -161,7 +166,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
                          variant_weights=tuple(args.random_weight if v == "random" else 1.0 for v in TrainConfig.variants),
                          init=args.init, lr_from=args.lr_from, pass_every=args.pass_every)
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
-    result = train(args.data, args.out, config, checkpoint=args.checkpoint, device=device)
+    rig = None
+    if args.rig is not None:
+        from tpnet_gpu import rigfile  # noqa: PLC0415
+
+        rig = rigfile.load(args.rig)
+    result = train(args.data, args.out, config, checkpoint=args.checkpoint, device=device, rig=rig)
     last = result["history"][-1]
     print(f"trained {last['epoch']} epochs: loss {last['loss']:.5f}, test RMSE network {last['test_rmse_network']:.4f} "
           f"px vs its targets {last['test_rmse_target']:.4f} px -> {args.out}")
@@ -249,12 +259,18 @@ def build_parser() -> argparse.ArgumentParser:
                       help="share of scenes held out for testing")
     data.add_argument("--seed", type=int, default=spec.seed, help="seed of the scenes and the split")
     data.add_argument("--supersample", type=int, default=spec.supersample, help="sub-pixel rays per axis")
+    data.add_argument("--rig", default=None, metavar="FILE",
+                      help="render the scenes with this rig (a rig file, docs/rig_file.md, or a shipped one: quad, "
+                           "binocular, two_quads; default the quad); its layers are one per direction group")
     data.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     data.set_defaults(func=_cmd_dataset)
 
     tr = sub.add_parser("train", help="train TPNET on a data set (checkpoints resume)")
     tr.add_argument("data", help="data set folder (from `tpnet dataset`)")
     tr.add_argument("--out", default="out/tpnet.pt", help="final weights (a recipe .json is written beside)")
+    tr.add_argument("--rig", default=None, metavar="FILE",
+                    help="the rig to train for (a rig file or a shipped one): must be the data set's rig (its layer "
+                         "lags); the network always has one layer per direction group of the data set's rig")
     tr.add_argument("--checkpoint", default="out/tpnet_checkpoint.pt", help="checkpoint file (resumed if present)")
     tr.add_argument("--epochs", type=int, default=train.epochs)
     tr.add_argument("--batch", type=int, default=train.batch, help="frames per step")

@@ -117,6 +117,9 @@ class DatasetSpec:
     colour_weights: tuple = BASELINE_CORRELATION.colour_weights
     near_offset: tuple = (0.005, 0.5)
     near_draws: int = NEAR_DRAWS
+    # the rig the scenes are rendered with: a rig file's fields (docs/rig_file.md, ``rigfile.rig_to_dict``);
+    # None: the quad (``Rig()``). An ideal rig takes the spec's size; a calibrated one must have it.
+    rig: dict | None = None
 
     def variants(self) -> tuple:
         """Names of the target variants each chunk holds."""

@@ -1,7 +1,9 @@
 """Training and test data for the network: rendered random scenes run through the tile processor.
 
-Per scene (one compressed NPZ chunk) and per target variant, every tile's 4 network layers ``(4, 9, 9)``
-(float16), its target disparity, and the ground truth (disparity at the tile centre, confidence, spread).
+Per scene (one compressed NPZ chunk) and per target variant, every tile's network layers ``(G, 9, 9)``
+(float16; one per direction group of the rig's pairs, ``tpnet_gpu.net.layers``: the quad's 4), its target
+disparity, and the ground truth (disparity at the tile centre, confidence, spread). The scenes are rendered with
+the spec's rig (``DatasetSpec.rig``, default the quad); the manifest keeps it and its layer lags.
 Variants (network.md §6): ``heuristic`` - targets from the disparity engine (``tpnet_gpu.disparity``, as the
 pipeline runs it; tiles it cannot measure, ``measured`` False, get ground truth + a random offset); ``random`` - ground truth + a uniform offset in
 +-``random_offset`` px; ``near0``, ``near1``, ... (``near_draws`` of them) - ground truth + an offset of
@@ -16,10 +18,11 @@ made, so training sees what the pipeline feeds the network.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import DatasetSpec  # noqa: F401 - DatasetSpec re-exported
@@ -29,17 +32,38 @@ FORMAT = "tpnet-dataset"
 VERSION = 4  # 4: + the raw frames, the engine's measured mask and the window surfaces (re-measuring at new targets)
 
 
-def _layers(processor, frames, target) -> np.ndarray:
-    """Network layers ``(tiles_y, tiles_x, 4, 9, 9)`` float16 at ``target (tiles_y, tiles_x)``."""
-    layers = processor.process(frames, target.astype(np.float32)).layers.detach().cpu().numpy()
-    return layers.reshape(target.shape + layers.shape[1:]).astype(np.float16)
+def spec_rig(spec: DatasetSpec) -> Rig:
+    """The rig of ``spec`` at its frame size: ``spec.rig`` (rig-file fields; None: the quad). An ideal rig
+    takes the spec's size; a calibrated one must already have it."""
+    if spec.rig is None:
+        return Rig(width=spec.width, height=spec.height)
+    from tpnet_gpu.rigfile import rig_from_dict  # noqa: PLC0415 - rigfile imports camera
+
+    rig = rig_from_dict(spec.rig, "spec.rig")
+    if rig.is_ideal():
+        return replace(rig, width=spec.width, height=spec.height, _cache={})
+    if (rig.width, rig.height) != (spec.width, spec.height):
+        raise ValueError(f"spec.rig: expected a calibrated rig of the data set's size {spec.width}x{spec.height}, "
+                         f"got {rig.width}x{rig.height}")
+    return rig
 
 
-def build_scene(index: int, spec: DatasetSpec, engine, processor) -> dict:
+def _layers(engine, processor, layers, frames, target) -> np.ndarray:
+    """Network layers ``(tiles_y, tiles_x, G, 9, 9)`` float16 at ``target (tiles_y, tiles_x)``: ``processor``
+    loads ``frames`` and is measured there as the engine measures (a calibrated rig's tile centres);
+    ``layers`` (``NetworkLayers``) combines its pair correlations."""
+    processor.load(frames)
+    target_t = torch.as_tensor(np.asarray(target, dtype=np.float32), device=processor.torch_device)
+    out = layers.of(engine.measure_at(processor, target_t)).detach().cpu().numpy()
+    return out.reshape(target.shape + out.shape[1:]).astype(np.float16)
+
+
+def build_scene(index: int, spec: DatasetSpec, engine, processor, layers) -> dict:
     """Render scene ``index`` and return its arrays (see the module docstring). ``engine`` (a
-    ``DisparityEngine`` of the spec's size) makes the heuristic targets; ``processor`` (correlating as
-    ``spec.correlation()``; may be the engine's own) makes the network layers."""
-    rig = Rig(width=spec.width, height=spec.height)
+    ``DisparityEngine`` of the spec's rig and size) makes the heuristic targets; ``processor`` (correlating as
+    ``spec.correlation()``; may be the engine's own) and ``layers`` (its ``NetworkLayers``) the network layers
+    (:func:`measurers` makes all three)."""
+    rig = spec_rig(spec)
     rng = np.random.default_rng([spec.seed, index])
     rendered = render(random_scene(rig, rng), rig, sensor=Sensor(), supersample=spec.supersample,
                       seed=int(rng.integers(2**31)))
@@ -62,29 +86,35 @@ def build_scene(index: int, spec: DatasetSpec, engine, processor) -> dict:
            "scene": np.int32(index)}
     for name, target in targets.items():
         out[f"target_{name}"] = target.astype(np.float32)
-        out[f"layers_{name}"] = _layers(processor, frames, target)
+        out[f"layers_{name}"] = _layers(engine, processor, layers, frames, target)
     return out
 
 
 def measurers(spec: DatasetSpec, device: str | None = None):
-    """The ``DisparityEngine`` of the spec's size (heuristic targets, frame scaling) and the processor that makes
-    the network layers (the engine's own when it correlates as ``spec.correlation()``)."""
+    """``(engine, processor, layers)``: the ``DisparityEngine`` of the spec's rig and size (heuristic targets,
+    frame scaling), the processor that makes the network layers (the engine's own when it correlates as
+    ``spec.correlation()``) and its ``NetworkLayers`` (the rig's direction groups)."""
     from tpnet_gpu.disparity import DisparityEngine  # noqa: PLC0415 - Warp starts on use
+    from tpnet_gpu.net.layers import NetworkLayers  # noqa: PLC0415 - torch
     from tpnet_gpu.processor import TileProcessor  # noqa: PLC0415
 
-    engine = DisparityEngine(spec.height, spec.width, device=device)
-    processor = (engine.tp if spec.correlation().resolved(engine.tp.colours) == engine.tp.config else
-                 TileProcessor(spec.height, spec.width, config=spec.correlation(), device=device))
-    return engine, processor
+    rig = spec_rig(spec)
+    engine = DisparityEngine(spec.height, spec.width, rig=rig, device=device)
+    tp = engine.tp
+    processor = (tp if spec.correlation().resolved(tp.colours) == tp.config else
+                 TileProcessor(spec.height, spec.width, camera_offsets=rig.offsets_array(), pairs=tp.pairs,
+                               config=spec.correlation(), device=device))
+    return engine, processor, NetworkLayers(rig.offsets, processor.pairs, processor.torch_device)
 
 
-def remeasure(chunk: dict, target: np.ndarray, engine, processor) -> np.ndarray:
-    """Layers ``(ty, tx, 4, 9, 9)`` float16 of a chunk's scene re-measured at ``target (ty, tx)`` from its raw
-    frames, scaled and correlated as :func:`build_scene` made them (``engine``, ``processor``: :func:`measurers`)."""
+def remeasure(chunk: dict, target: np.ndarray, engine, processor, layers) -> np.ndarray:
+    """Layers ``(ty, tx, G, 9, 9)`` float16 of a chunk's scene re-measured at ``target (ty, tx)`` from its raw
+    frames, scaled and correlated as :func:`build_scene` made them (``engine``, ``processor``, ``layers``:
+    :func:`measurers`)."""
     if "raws" not in chunk:
         raise ValueError("chunk: expected a version-4 chunk with raw frames ('raws'), got one without")
     frames = engine.normalise(chunk["raws"].astype(np.float32) - chunk["black_level"])
-    return _layers(processor, frames, np.asarray(target, dtype=np.float32))
+    return _layers(engine, processor, layers, frames, np.asarray(target, dtype=np.float32))
 
 
 def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = None, progress: bool = True) -> Path:
@@ -94,18 +124,18 @@ def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = Non
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    engine, processor = measurers(spec, device)
+    engine, processor, layers = measurers(spec, device)
     labels = spec.split()
     chunks = []
     for index in tqdm(range(spec.scenes), desc="scenes", disable=not progress):
         path = folder / f"scene_{index:04d}.npz"
         if not path.exists():
             tmp = path.with_suffix(".tmp.npz")
-            np.savez_compressed(tmp, **build_scene(index, spec, engine, processor))
+            np.savez_compressed(tmp, **build_scene(index, spec, engine, processor, layers))
             tmp.replace(path)
         chunks.append({"file": path.name, "split": labels[index], "scene": index})
     manifest = {"format": FORMAT, "version": VERSION, "spec": asdict(spec), "variants": list(spec.variants()),
-                "chunks": chunks}
+                "lags": [list(lag) for lag in layers.lags], "chunks": chunks}
     (folder / "manifest.json").write_text(json.dumps(manifest, indent=1))
     return folder
 

@@ -1,31 +1,40 @@
 """The frame pipeline: raw frames of any rig in, disparity (+ confidence) and an RGBA texture out, on one device.
 
 Per frame: the disparity engine (``tpnet_gpu.disparity``: coarse-to-fine cost-volume search, SGM over the tile
-grid, sparse re-correlation) gives each tile's disparity; for the quad, TPNET then reads the tile processor's
-layers at those disparities (zero-copy) and predicts the final disparity; the texture is made at that disparity.
+grid, sparse re-correlation) gives each tile's disparity; TPNET then reads the network layers at those
+disparities (the quad's from the processor's kernel, zero-copy; any other rig's from its pair correlations, one
+layer per direction group, ``tpnet_gpu.net.layers``) and predicts the final disparity, with weights trained for
+the rig's layer lags (network.md §11: the shipped ones are picked by lags; a rig none fits runs without the
+network, logged); the texture is made at that disparity.
 Frames are loaded once per frame. Buffers belong to the tile processors and the model and are allocated once per
 frame size; results are views or new small tensors, valid until the next frame.
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 import torch
 
-from tpnet_gpu import tables
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import EngineConfig, TextureConfig
 from tpnet_gpu.disparity.engine import DisparityEngine
+from tpnet_gpu.net import infer
+from tpnet_gpu.net.layers import NetworkLayers, lags_match
 from tpnet_gpu.processor import TileProcessor
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
 class PipelineConfig:
-    """``engine``: the disparity engine's settings; ``network_passes``: TPNET passes (quad only), each
-    re-correlating at the previous one's disparity; ``textures``: make the RGBA texture."""
+    """``engine``: the disparity engine's settings; ``network_passes``: TPNET passes (when the pipeline has
+    weights for its rig), each re-correlating at the previous one's disparity; ``textures``: make the RGBA
+    texture."""
 
     engine: EngineConfig = EngineConfig()
     network_passes: int = 1
@@ -41,8 +50,8 @@ class FrameResult:
     """One frame's results, torch tensors on the pipeline's device (valid until the next frame).
 
     Attributes:
-        disparity: ``(tiles_y, tiles_x)`` final disparity, px (TPNET's for the quad, else the engine's); NaN
-            where the engine trusted no measurement.
+        disparity: ``(tiles_y, tiles_x)`` final disparity, px (TPNET's where the pipeline has weights for its
+            rig, ``Pipeline.weights``, else the engine's); NaN where the engine trusted no measurement.
         confidence: ``(tiles_y, tiles_x)`` the engine's confidence (its final correlation peak's strength,
             scaled down on two-depth tiles; higher = surer), 0 = none.
         two_depth: ``(tiles_y, tiles_x)`` bool: the tile's window straddles two depths (its neighbours'
@@ -74,9 +83,15 @@ class Pipeline:
         pairs: camera pairs to correlate (default: all pairs of the rig; the quad's 6).
         min_disparity, max_disparity: the range searched, px (default: 0 to the rig's disparity at
             ``EngineConfig.nearest_m``).
-        weights: TPNET weights (default: the shipped ones; quad only).
+        weights: TPNET weights (default: the shipped ones trained for the rig's layer lags, none for a rig
+            no shipped weights fit: the engine's result, logged as a warning). Weights trained for other lags
+            are refused (``ValueError``).
         device: "cpu" or "cuda" (default cuda when present).
         backend: kernel language of the tile processors, "warp" or "taichi"; None: ``TileProcessor``'s default.
+
+    Attributes:
+        weights: the TPNET weights in use (a path), or None (no network: the disparity is the engine's).
+        layers: the rig's ``NetworkLayers`` (its direction groups: ``layers.lags``).
     """
 
     def __init__(self, height: int, width: int, *, cfa: str | None = "GRBG", rig: Rig | None = None, pairs=None,
@@ -95,16 +110,38 @@ class Pipeline:
         self.grid = self.engine.grid
         self.model = None
         self.network_tp = None
-        if tp.pairs == tables.QUAD_PAIRS:
-            from tpnet_gpu.net import infer  # noqa: PLC0415 - torch model loading on use
-
-            net_config = infer.correlation(weights)
+        self.layers = NetworkLayers(self.engine.rig.offsets, tp.pairs, self.device)
+        self.weights = self._weights(weights, tp.colours)
+        if self.weights is not None:
+            net_config = infer.correlation(self.weights)
             same = net_config.resolved(tp.colours) == tp.config
             self.network_tp = tp if same else TileProcessor(
-                height, width, cfa=cfa, config=net_config, textures=config.textures, texture_config=TextureConfig(),
-                device=str(tp.device), backend=backend)
-            self.model = infer.load(weights, device=self.device)
-            self._infer = infer.infer
+                height, width, camera_offsets=self.engine.rig.offsets_array(), pairs=tp.pairs, cfa=cfa,
+                config=net_config, textures=config.textures, texture_config=TextureConfig(), device=str(tp.device),
+                backend=backend)
+            self.model = infer.load(self.weights, device=self.device)
+
+    def _weights(self, weights, colours: int) -> Path | None:
+        """The weights for this rig's layer lags and these frames' colours: ``weights`` if they were trained for
+        them (else ValueError), or the shipped ones that were, or None (logged: the engine's result)."""
+        lags = [list(v) for v in self.layers.lags]
+        if weights is not None:
+            if not lags_match(infer.lags(weights), self.layers.lags):
+                raise ValueError(f"weights: {weights} were trained for a rig whose layers have lags "
+                                 f"{[list(v) for v in infer.lags(weights)]}; this pipeline's rig has {lags} "
+                                 f"(train weights for it: `tpnet dataset --rig` then `tpnet train`)")
+            trained = infer.correlation(weights).colour_weights
+            if trained is not None and len(trained) != colours:
+                raise ValueError(f"weights: {weights} were trained on frames of {len(trained)} colours; these "
+                                 f"frames have {colours} (cfa None: mono)")
+            return Path(weights)
+        found = infer.shipped_for(self.layers.lags)
+        trained = None if found is None else infer.correlation(found).colour_weights
+        if found is None or (trained is not None and len(trained) != colours):
+            log.warning("no shipped TPNET weights for this rig (layer lags %s) and %d-colour frames: the disparity "
+                        "is the engine's", lags, colours)
+            return None
+        return found
 
     def process(self, frames) -> FrameResult:
         """Frames ``(cams, H, W)`` (torch on any device or NumPy, any real dtype; black level subtracted)."""
@@ -121,7 +158,8 @@ class Pipeline:
             # tiles the refinement left unmeasured are read at the first stage's answer (always finite)
             target = torch.where(measured, initial, result.search)
             for _ in range(cfg.network_passes):
-                target = self._infer(self.model, self.engine.measure_at(tp, target).layers, target, grid=self.grid)
+                layers = self.layers.of(self.engine.measure_at(tp, target))
+                target = infer.infer(self.model, layers, target, grid=self.grid)
             disparity = torch.where(measured, target, torch.full_like(target, float("nan")))
         texture = None
         if cfg.textures:  # shift-corrected at the final disparity
@@ -142,8 +180,6 @@ class Pipeline:
 def load_frames(paths, cfa: str | None = None) -> tuple[np.ndarray, str]:
     """Black-subtracted float32 frames ``(cams, H, W)`` and their CFA from a scene folder (one path) or one raw
     file per camera (DNG or anything LibRaw reads; TIFF needs ``cfa``)."""
-    from pathlib import Path  # noqa: PLC0415
-
     from tpnet_gpu import rawio  # noqa: PLC0415
     from tpnet_gpu.scenes.folder import load  # noqa: PLC0415
 

@@ -150,6 +150,25 @@ def test_bench_network(tmp_path, capsys):
     assert png is None or png.stat().st_size > 0
 
 
+def test_bench_network_binocular(tmp_path, capsys):
+    """``--rig binocular``: no old loop and no LMA (quad only); TPNET with one-layer weights, against the engine."""
+    from tpnet_gpu.net.model import TPNet  # noqa: PLC0415
+
+    weights = tmp_path / "bino.pt"
+    torch.save(TPNet(layers=1).state_dict(), weights)
+    weights.with_suffix(".json").write_text(json.dumps({"lags": [[1.0, 0.0]]}))
+    argv = ["--scenes", "1", "--passes", "1", "--height", "64", "--width", "64", "--png", "", "--rig", "binocular",
+            "--weights", str(weights)]
+    report, out, err = run_bench(bench_network, argv, tmp_path, capsys)
+    assert list(report["stats"]) == ["engine", "TPNET (1 pass)"] and report["rig"] == "binocular"
+    _check_accuracy(report, {"engine"})
+    assert "rig binocular (2 cameras)" in report["table"][0]
+    torch.save(TPNet().state_dict(), tmp_path / "quad.pt")  # no recipe: the quad's lags
+    with pytest.raises(SystemExit):  # quad weights for a binocular rig: refused by the parser
+        bench_network.main([*argv[:-1], str(tmp_path / "quad.pt")])
+    assert "were trained for layer lags ((1.0, 0.0), (0.0, 1.0)" in capsys.readouterr().err
+
+
 def test_bench_network_limits(tmp_path, capsys):
     from tpnet_gpu.bench import bench_network_limits as limits
 

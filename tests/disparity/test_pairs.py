@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 import torch
 
-from tpnet_gpu import tables
-from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs, pair_vectors, window_overlap
+from tpnet_gpu import rigfile, tables
+from tpnet_gpu.disparity.pairs import (AxisSampler, combine_pairs, default_pairs, direction_groups, pair_vectors,
+                                       window_overlap)
 
 
 def test_quad_pair_vectors_are_the_spec_directions():
@@ -56,3 +57,50 @@ def test_lags_beyond_the_correlation_are_nan_and_left_out():
     assert torch.isnan(values[0, 0, 0]) and torch.isfinite(values[0, 1, 0])
     assert torch.isfinite(combine_pairs(values)).all()
     assert torch.isnan(combine_pairs(torch.full((1, 2, 1), float("nan")))).all()
+
+
+# --------------------------------------------------------------------------------------- direction groups
+def test_quad_groups_are_the_network_layers():
+    """Oracle: network.md §1 - hor = pairs 0, 1; vert = 2, 3; diag-main = 4; diag-other = 5, in that order."""
+    groups = direction_groups(tables.QUAD_OFFSETS, tables.QUAD_PAIRS)
+    assert [g.lag for g in groups] == [(1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (1.0, -1.0)]
+    assert [g.members for g in groups] == [((0, False), (1, False)), ((2, False), (3, False)), ((4, False),),
+                                           ((5, False),)]
+
+
+def test_opposite_pairs_fold_mirrored():
+    swapped = [(1, 0), (2, 3), (2, 0), (1, 3), (3, 0), (1, 2)]  # every pair but two reversed
+    groups = direction_groups(tables.QUAD_OFFSETS, swapped)
+    assert [g.lag for g in groups] == [(1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (1.0, -1.0)]
+    assert [g.members for g in groups] == [((0, True), (1, False)), ((2, True), (3, False)), ((4, True),),
+                                           ((5, True),)]
+
+
+def test_binocular_has_one_group():
+    assert direction_groups(((-0.5, 0.0), (0.5, 0.0)), [(0, 1)]) == (((1.0, 0.0), ((0, False),)),)
+    assert direction_groups(((0.0, 0.0), (0.0, 1.0)), [(1, 0)]) == (((0.0, 1.0), ((0, True),)),)  # vertical
+
+
+def test_eight_camera_groups_by_lag_vector():
+    """two_quads (4x2 grid, rig_file.md §4): every pair in exactly one group, whose lag is the pair's lag or its
+    negative (as flagged); lags differ in direction or length; order by length, then angle mod 180."""
+    offsets = rigfile.load("two_quads").offsets
+    pairs = default_pairs(offsets)
+    groups = direction_groups(offsets, pairs)
+    expected = [(1, 0), (0, 1), (1, 1), (1, -1), (2, 0), (2, 1), (2, -1), (3, 0), (3, 1), (3, -1)]
+    assert [g.lag for g in groups] == [tuple(map(float, v)) for v in expected]
+    seen = sorted(p for g in groups for p, _ in g.members)
+    assert seen == list(range(len(pairs))) == list(range(28))
+    r = np.asarray(offsets)
+    for g in groups:
+        for p, mirrored in g.members:
+            a, b = pairs[p]
+            np.testing.assert_allclose((r[b] - r[a]) * (-1 if mirrored else 1), g.lag, atol=1e-12)
+    assert [len(g.members) for g in groups] == [6, 4, 3, 3, 4, 2, 2, 2, 1, 1]
+
+
+def test_direction_groups_reject_bad_pairs():
+    with pytest.raises(ValueError, match=r"pairs: expected a non-empty list of \(a, b\) camera indices in 0..1"):
+        direction_groups(((-0.5, 0.0), (0.5, 0.0)), [(0, 2)])
+    with pytest.raises(ValueError, match="pairs: a pair of cameras at the same offset has no lag direction"):
+        direction_groups(((0.0, 0.0), (0.0, 0.0)), [(0, 1)])

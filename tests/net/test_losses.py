@@ -153,6 +153,23 @@ def test_weights_loss_constant_maps():
         close(weights_loss(w, mode=mode), (4 * ss / 6.8**2 / 324) / (324 / 325))
 
 
+def test_weights_loss_reads_the_layers_columns_only():
+    # One layer (a binocular rig) and 25 more inputs after the target: the spike of test_weights_loss_spike in
+    # the one 9x9 map gives (1 + 8a^2 + 4b^2) / 81 over mean(W^2) = 1/107; a 1 in the extra inputs only enters
+    # the denominator (as the target column does); the 4-layer reading of the same columns would differ.
+    w = torch.zeros(1, 81 + 1 + 25, dtype=F64)
+    w[0, 4 * 9 + 4] = 1.0
+    one_layer = (1 + 8 * A**2 + 4 * B**2) / 81 * 107
+    close(weights_loss(w, layers=1), one_layer)
+    w[0, 81 + 1 + 7] = 1.0
+    close(weights_loss(w, layers=1), one_layer / 2)
+    wide = torch.zeros(1, 325 + 25, dtype=F64)
+    wide[0, 2 * 81 + 4 * 9 + 4] = 1.0  # layer 2's centre of a quad network with 25 extra inputs
+    close(weights_loss(wide), (1 + 8 * A**2 + 4 * B**2) / 324 * 350)
+    with pytest.raises(ValueError, match=r"first_layer_weight: expected shape \(out, > 81\) for 1 layers"):
+        weights_loss(torch.zeros(2, 81), layers=1)
+
+
 def test_weights_loss_zero_weights_is_zero():
     assert weights_loss(torch.zeros(2, 325)) == 0
 
@@ -229,7 +246,7 @@ def test_losses_reject_bad_input():
         mirror_loss(t64(1.0), t64(1.0), t64(1.0), RING_GT[:, :7], RING_S[:, :7])
     with pytest.raises(ValueError, match="mode: expected one of \\('as_coded', 'isotropic'\\), got 'iso'"):
         weights_loss(torch.zeros(2, 325), mode="iso")
-    with pytest.raises(ValueError, match=r"first_layer_weight: expected shape \(out, 325\), got \(325, 256\)"):
+    with pytest.raises(ValueError, match=r"first_layer_weight: expected shape \(out, > 324\) for 4 layers and the target, got \(325, 256\)"):
         weights_loss(torch.zeros(325, 256))
     with pytest.raises(ValueError, match="partial_weights: expected 3 weights"):
         total_loss(torch.zeros(2, 3), T[:2], GT[:2], S[:2], torch.zeros(1, 325, dtype=F64), partial_weights=(1,))

@@ -311,3 +311,31 @@ def test_functional_core_matches_module():
     x = torch.randn(3, 25, 325)
     params = ([(m.weight, m.bias) for m in net.stage1], [(m.weight, m.bias) for m in net.stage2])
     torch.testing.assert_close(clusters_residual(x, *params), net(x), atol=0, rtol=0)
+
+
+@pytest.mark.parametrize("layers", [1, 10])
+def test_any_number_of_layers(layers):
+    """TPNet(layers=G) reads G*81 + 1 inputs per tile; its two forms agree (oracle: forward_clusters on loop-cut
+    clusters, atol 1e-5), and the other stages keep the quad's sizes."""
+    torch.manual_seed(3)
+    net = TPNet(layers=layers)
+    assert net.first_layer_weight.shape == (256, layers * 81 + 1) and net.stage2[0].weight.shape == (256, 825)
+    layers_t = torch.randn(TY, TX, layers, 9, 9)
+    target = torch.rand(TY, TX) * 4
+    clusters = _clusters_by_loops(_raw_inputs(layers_t, target))
+    assert clusters.shape == (TY * TX, 25, layers * 81 + 1)
+    with torch.no_grad():
+        want = net.forward_clusters(clusters).view(TY, TX, 3)[..., 0]
+        torch.testing.assert_close(net.forward_frame(layers_t, target), want, atol=ATOL, rtol=0)
+    with pytest.raises(ValueError, match=rf"layers: expected shape \({TY}, {TX}, {layers}, 9, 9\) .* got"):
+        net.forward_frame(torch.zeros(TY, TX, layers + 1, 9, 9), target)
+    with pytest.raises(ValueError, match="layers: expected a positive number of correlation layers, got 0"):
+        TPNet(layers=0)
+
+
+def test_shipped_quad_weights_load_into_the_default_network():
+    from tpnet_gpu.net.infer import DEFAULT_WEIGHTS  # noqa: PLC0415
+
+    net = TPNet()
+    net.load_state_dict(torch.load(DEFAULT_WEIGHTS, weights_only=True))
+    assert net.layers == 4 and net.first_layer_weight.shape == (256, 325)

@@ -1,6 +1,8 @@
 """Training loop (net/train.py) on a tiny rendered data set: the loss falls, runs are deterministic for a
 seed, and a resumed run equals an unbroken one (oracle: the same run's own weights, bit for bit)."""
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -107,8 +109,8 @@ def test_pass_samples_are_re_measured_at_the_models_output(data):
     samples = frame_samples(chunks, ("heuristic", "random"))
     model = TPNet()
     torch.nn.init.zeros_(model.stage2[-1].weight)  # residual = bias = 0
-    engine, processor = dataset.measurers(SPEC, "cpu")
-    measure = lambda chunk, t: dataset.remeasure(chunk, t, engine, processor)  # noqa: E731
+    measurers = dataset.measurers(SPEC, "cpu")
+    measure = lambda chunk, t: dataset.remeasure(chunk, t, *measurers)  # noqa: E731
     targets = refresh_passes(model, samples, chunks, measure)
     refresh_passes(model, samples, chunks, measure)
     passes = [s for s in samples if s["variant"] == "pass"]
@@ -119,3 +121,23 @@ def test_pass_samples_are_re_measured_at_the_models_output(data):
         np.testing.assert_array_equal(sample["layers"].numpy(), expected)
     with pytest.raises(ValueError, match="pass_every"):
         TrainConfig(pass_every=0)
+
+
+def test_a_binocular_data_set_trains_a_one_layer_network(tmp_path):
+    """The network has one layer per direction group of the data set's rig (binocular: 1); the recipe records
+    the rig and its lags; ``rig`` must be the data set's (oracle: the lags of the shipped rig files)."""
+    from tpnet_gpu import rigfile  # noqa: PLC0415
+
+    spec = DatasetSpec(scenes=2, width=64, height=48, test_fraction=0.5, seed=9, supersample=1,
+                       rig=rigfile.rig_to_dict(rigfile.load("binocular")))
+    dataset.build(tmp_path / "data", spec, device="cpu", progress=False)
+    config = TrainConfig(epochs=1, batch=2)
+    train(tmp_path / "data", tmp_path / "w.pt", config, progress=False, rig=rigfile.load("binocular"))
+    weights = torch.load(tmp_path / "w.pt")
+    assert weights["stage1.0.weight"].shape == (256, 82)
+    recipe = json.loads((tmp_path / "w.json").read_text())
+    assert recipe["lags"] == [[1.0, 0.0]] and recipe["rig"]["offsets"] == [[-0.5, 0.0], [0.5, 0.0]]
+    assert "--rig binocular" in recipe["command"]
+    with pytest.raises(ValueError, match=r"rig: the data set .* was rendered with a rig of layer lags \[\[1.0, 0.0\]\]; "
+                                         r"the given rig's are \[\[1.0, 0.0\], \[0.0, 1.0\], \[1.0, 1.0\], \[1.0, -1.0\]\]"):
+        train(tmp_path / "data", tmp_path / "x.pt", config, progress=False, rig=rigfile.load("quad"))

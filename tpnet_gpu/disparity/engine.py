@@ -17,11 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from tpnet_gpu import tables
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig
 from tpnet_gpu.disparity.measure import Measurer, row_chunks
-from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs
+from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs, default_pairs
 from tpnet_gpu.disparity.volume import CostVolume, aggregate, pick
 from tpnet_gpu.processor import TileProcessor, validate
 
@@ -109,8 +108,7 @@ class DisparityEngine:
             raise ValueError(f"rig: expected a {width}x{height} sensor, got {self.rig.width}x{self.rig.height}")
         offsets = self.rig.offsets_array()
         if pairs is None:
-            pairs = tables.QUAD_PAIRS if offsets.shape == (4, 2) and np.allclose(offsets, tables.QUAD_OFFSETS) else \
-                tuple((a, b) for a in range(len(offsets)) for b in range(a + 1, len(offsets)))
+            pairs = default_pairs(offsets)
         self.config = config
         self.d_max = config.d_max if config.d_max is not None else float(self.rig.disparity(config.nearest_m))
         self.tp = TileProcessor(height, width, camera_offsets=offsets, pairs=pairs, cfa=cfa,

@@ -8,6 +8,8 @@ correlation of a tile measured at target T with true disparity T + e peaks at la
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -20,6 +22,15 @@ def pair_vectors(offsets, pairs) -> np.ndarray:
     """``(pairs, 2)`` lag per unit residual disparity (x, y): r_second - r_first."""
     r = np.asarray(offsets, dtype=np.float64)
     return np.array([r[b] - r[a] for a, b in pairs])
+
+
+def default_pairs(offsets) -> tuple:
+    """The pairs a rig correlates unless told otherwise: the quad's 6 in the spec's order for the quad's offsets,
+    else every pair (a, b), a < b."""
+    r = np.asarray(offsets, dtype=np.float64)
+    if r.shape == (4, 2) and np.allclose(r, tables.QUAD_OFFSETS):
+        return tables.QUAD_PAIRS
+    return tuple((a, b) for a in range(len(r)) for b in range(a + 1, len(r)))
 
 
 def window_overlap(shift) -> np.ndarray:
@@ -78,3 +89,64 @@ def combine_pairs(values: torch.Tensor, offset: float = COMBINE_OFFSET) -> torch
     logs = torch.nan_to_num(values, nan=1.0 - offset).add_(offset).clamp_(min=1e-6).log_()
     out = torch.exp(logs.sum(dim=1) / count.clamp(min=1)) - offset
     return torch.where(count > 0, out, torch.full_like(out, float("nan")))
+
+
+# Lags closer than this (in baselines) are one group: offsets read from rig files are rounded decimals.
+LAG_TOLERANCE = 1e-6
+
+
+class DirectionGroup(NamedTuple):
+    """One direction group of pairs (see :func:`direction_groups`)."""
+
+    lag: tuple  # (x, y) the group's lag per unit residual disparity, baselines (x right, y down)
+    members: tuple  # ((pair index, mirrored), ...): mirrored where the pair's lag is -lag
+
+
+def direction_groups(offsets, pairs) -> tuple[DirectionGroup, ...]:
+    """Pairs grouped by their full lag vector ``v = r_b - r_a`` (direction and length), for the network layers.
+
+    Convention: a pair whose lag is ``-v`` joins ``v``'s group, mirrored (its correlation is point-mirrored
+    about the zero lag before it is combined: conj(A) B of the swapped pair). A group's lag is oriented with
+    x > 0, or x = 0 and y > 0 (y down). Groups are ordered by lag length, then by the lag's angle
+    atan2(y, x) mod 180 degrees ascending (0 = horizontal, 90 = vertical, y down). Members keep the pairs'
+    order. For the quad this gives the network's [hor (1, 0), vert (0, 1), diag-main (1, 1), diag-other
+    (1, -1)] with pairs [(0, 1), (2, 3)], [(0, 2), (1, 3)], [(0, 3)], [(2, 1)]; a binocular rig has one group.
+
+    Args:
+        offsets: ``(cams, 2)`` camera offsets r_i in baselines (x right, y down).
+        pairs: ``(P, 2)`` camera pairs (first, second).
+
+    Returns:
+        ``G`` groups ``(lag (x, y) floats, ((pair, mirrored), ...))``.
+
+    >>> [g.lag for g in direction_groups(tables.QUAD_OFFSETS, tables.QUAD_PAIRS)]
+    [(1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (1.0, -1.0)]
+    """
+    r = np.asarray(offsets, dtype=np.float64)
+    if r.ndim != 2 or r.shape[1] != 2:
+        raise ValueError(f"offsets: expected shape (cams, 2), got {r.shape}")
+    pair_list = [tuple(p) for p in pairs]
+    if not pair_list or any(len(p) != 2 or not all(0 <= c < len(r) for c in p) or p[0] == p[1] for p in pair_list):
+        raise ValueError(f"pairs: expected a non-empty list of (a, b) camera indices in 0..{len(r) - 1}, a != b, "
+                         f"got {pairs!r}")
+    vectors = pair_vectors(r, pair_list)
+    if np.any(np.hypot(vectors[:, 0], vectors[:, 1]) < LAG_TOLERANCE):
+        raise ValueError(f"pairs: a pair of cameras at the same offset has no lag direction ({pairs!r})")
+    groups: list[tuple[np.ndarray, list]] = []
+    for index, v in enumerate(vectors):
+        mirrored = v[0] < -LAG_TOLERANCE or (abs(v[0]) <= LAG_TOLERANCE and v[1] < 0)
+        lag = -v if mirrored else v
+        for group_lag, members in groups:
+            if np.abs(group_lag - lag).max() <= LAG_TOLERANCE:
+                members.append((index, bool(mirrored)))
+                break
+        else:
+            groups.append((lag, [(index, bool(mirrored))]))
+
+    def order(group):
+        lag = group[0]
+        angle = np.degrees(np.arctan2(lag[1], lag[0])) % 180.0
+        return round(float(np.hypot(*lag)), 6), round(float(angle), 6) % 180.0
+
+    return tuple(DirectionGroup(tuple(float(c) + 0.0 for c in lag), tuple(members))
+                 for lag, members in sorted(groups, key=order))

@@ -102,3 +102,25 @@ def network_layers(corr, pairs=tables.QUAD_PAIRS, *, offset: float = tables.NET_
     parts = [combine(c[..., 0, :, :], c[..., 1, :, :]), combine(c[..., 2, :, :], c[..., 3, :, :]),
              c[..., 4, :, :], c[..., 5, :, :]]
     return np.stack(parts, axis=-3)
+
+
+def group_layers(corr, groups, *, offset: float = tables.NET_CORR_OFFSET) -> np.ndarray:
+    """The network layers of any rig ``(..., G, 9, 9)``, float64, from pair tiles ``(..., P, S, S)`` and its
+    direction groups ``((lag, ((pair, mirrored), ...)), ...)`` (``disparity.pairs.direction_groups``).
+
+    Per group, on the centre 9x9 of each member (point-mirrored, both axes flipped, where ``mirrored``): one
+    member as it is; n members ``(prod (c_i + o))^(1/n) - o`` where all are positive, else 0 (o < 0: the plain
+    mean) - for two members :func:`network_layers`' combine.
+    """
+    c = crop_centre(np.asarray(corr, dtype=np.float64), tables.NET_RADIUS)
+    out = []
+    for _, members in groups:
+        tiles = np.stack([np.flip(c[..., p, :, :], (-2, -1)) if m else c[..., p, :, :] for p, m in members])
+        if len(members) == 1:
+            out.append(tiles[0])
+        elif offset < 0:
+            out.append(tiles.mean(axis=0))
+        else:
+            root = np.prod(np.maximum(tiles + offset, 0.0), axis=0) ** (1.0 / len(members))
+            out.append(np.where(np.all(tiles > 0, axis=0), root - offset, 0.0))
+    return np.stack(out, axis=-3)

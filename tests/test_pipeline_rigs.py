@@ -1,0 +1,101 @@
+"""The pipeline's network on rigs other than the quad (tpnet_gpu/pipeline.py, network.md §11): it picks the
+weights trained for its rig's layer lags, refuses others with a message naming both, and runs without the
+network where none fit. Oracles: the lags written in the weights' recipes, and the engine's own result."""
+
+import json
+import logging
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from tpnet_gpu import rigfile
+from tpnet_gpu.net import infer
+from tpnet_gpu.net.model import TPNet
+from tpnet_gpu.pipeline import Pipeline, PipelineConfig
+from tpnet_gpu.scenes import Scene, Sky, plane, render
+from tpnet_gpu.scenes import textures as tx
+
+H, W = 64, 96
+D = 3.3
+NO_TEXTURES = PipelineConfig(textures=False)
+
+
+def _rig(name):
+    return replace(rigfile.load(name), width=W, height=H, _cache={})  # an ideal rig at the frames' size
+
+
+@pytest.fixture()
+def shipped(tmp_path, monkeypatch):
+    """A weights folder with a quad network (no recipe: the quad's, as v3's predecessors) and a one-layer
+    network whose recipe says it was trained for the lag (1, 0); the pipeline's search looks only there."""
+    torch.manual_seed(0)
+    quad = tmp_path / "quad.pt"
+    torch.save(TPNet().state_dict(), quad)
+    bino = tmp_path / "tpnet_binocular_test.pt"
+    torch.save(TPNet(layers=1).state_dict(), bino)
+    bino.with_suffix(".json").write_text(json.dumps({"lags": [[1.0, 0.0]]}))
+    monkeypatch.setattr(infer, "WEIGHTS_DIR", tmp_path)
+    monkeypatch.setattr(infer, "DEFAULT_WEIGHTS", quad)
+    return {"quad": quad, "binocular": bino}
+
+
+def _frames(rig):
+    scene = Scene([plane(rig, float(rig.distance(D)), tx.noise_texture(np.random.default_rng(0), 256, contrast=0.3))],
+                  Sky())
+    rendered = render(scene, rig, seed=1, supersample=1)
+    return torch.from_numpy(rendered.raws.astype(np.float32) - rendered.sensor.black_level)
+
+
+def test_binocular_pipeline_picks_the_binocular_weights(shipped):
+    rig = _rig("binocular")
+    pipe = Pipeline(H, W, rig=rig, device="cpu", max_disparity=8.0, config=NO_TEXTURES)
+    assert pipe.weights == shipped["binocular"] and pipe.model.layers == 1 and pipe.layers.lags == ((1.0, 0.0),)
+    result = pipe.process(_frames(rig))
+    measured = torch.isfinite(result.initial)
+    assert result.disparity.shape == (8, 12) and bool(measured.any())
+    assert not torch.equal(result.disparity[measured], result.initial[measured])  # the network moved them
+    quad = Pipeline(H, W, device="cpu", max_disparity=8.0, config=NO_TEXTURES)
+    assert quad.weights == shipped["quad"] and quad.model.layers == 4
+
+
+def test_mismatching_weights_are_refused(shipped):
+    with pytest.raises(ValueError, match=r"weights: .*quad.pt were trained for a rig whose layers have lags "
+                                         r"\[\[1.0, 0.0\], \[0.0, 1.0\], \[1.0, 1.0\], \[1.0, -1.0\]\]; this "
+                                         r"pipeline's rig has \[\[1.0, 0.0\]\]"):
+        Pipeline(H, W, rig=_rig("binocular"), weights=shipped["quad"], device="cpu", config=NO_TEXTURES)
+    with pytest.raises(ValueError, match=r"weights: .* lags \[\[1.0, 0.0\]\]; this pipeline's rig has \[\[1.0, 0.0\], "
+                                         r"\[0.0, 1.0\]"):
+        Pipeline(H, W, weights=shipped["binocular"], device="cpu", config=NO_TEXTURES)
+
+
+def test_mono_frames_do_not_take_colour_trained_weights(shipped, caplog):
+    """The shipped weights were trained on colour (Bayer, green-only) correlations: a mono pipeline (ordinary
+    images, ``tpnet process LEFT RIGHT``) runs the engine alone, and refuses such weights passed to it."""
+    (shipped["binocular"].with_suffix(".json")).write_text(json.dumps(
+        {"lags": [[1.0, 0.0]], "dataset_spec": {"colour_weights": [0.0, 0.0, 1.0], "fat_zero": 1e4}}))
+    with caplog.at_level(logging.WARNING, logger="tpnet_gpu.pipeline"):
+        pipe = Pipeline(H, W, cfa=None, rig=_rig("binocular"), device="cpu", max_disparity=8.0, config=NO_TEXTURES)
+    assert pipe.weights is None and "1-colour frames" in caplog.text
+    with pytest.raises(ValueError, match=r"weights: .* were trained on frames of 3 colours; these frames have 1"):
+        Pipeline(H, W, cfa=None, rig=_rig("binocular"), weights=shipped["binocular"], device="cpu",
+                 config=NO_TEXTURES)
+    assert Pipeline(H, W, rig=_rig("binocular"), device="cpu", config=NO_TEXTURES).weights == shipped["binocular"]
+
+
+def test_a_rig_without_weights_runs_the_engine_alone(shipped, caplog):
+    rig = _rig("two_quads")
+    with caplog.at_level(logging.WARNING, logger="tpnet_gpu.pipeline"):
+        pipe = Pipeline(H, W, rig=rig, device="cpu", max_disparity=8.0, config=NO_TEXTURES)
+    assert pipe.weights is None and pipe.model is None and pipe.layers.count == 10
+    assert "no shipped TPNET weights for this rig" in caplog.text and "the disparity is the engine's" in caplog.text
+    result = pipe.process(_frames(rig))
+    torch.testing.assert_close(result.disparity, result.initial, equal_nan=True, rtol=0, atol=0)
+
+
+def test_the_shipped_binocular_weights_are_found():
+    found = infer.shipped_for(((1.0, 0.0),))
+    assert found is not None and found.name == "tpnet_binocular_v1.pt"
+    assert infer.load(found).layers == 1 and infer.recipe(found)["rig"]["offsets"] == [[-0.5, 0.0], [0.5, 0.0]]
+    assert infer.shipped_for(infer.lags()) == infer.DEFAULT_WEIGHTS
