@@ -139,7 +139,8 @@ def test_one_shot_backend_and_threads_follow_the_frame_size(tmp_path, engine):
     (tmp_path / "big").mkdir()
     small, big = _pair(tmp_path, (240, 320)), _pair(tmp_path / "big", (240, 328))
     for images, backend in ((small, []), (big, []), (small, ["--backend", "taichi"])):
-        assert main(["process", *images, "--max-disparity", "4", "--out", str(tmp_path / "o"), *backend]) == 0
+        assert main(["process", *images, "--max-disparity", "4", "--out", str(tmp_path / "o"), "--overwrite",
+                     *backend]) == 0
     assert [(c["height"] * c["width"], c["backend"]) for c in engine] == [(76800, "warp"), (78720, None),
                                                                           (76800, "taichi")]
     assert [c["torch_threads"] for c in engine] == [1, threads, 1] and torch.get_num_threads() == threads
@@ -156,7 +157,7 @@ def test_process_rig_of_images_through_the_engine(tmp_path, engine):
                  "--reference", "2"]) == 0
     assert engine[0]["rig"].offsets == ((-0.5, -0.75), (0.5, -0.75), (0.0, 0.0))
     assert main(["process", *images[:2], "--rig", "binocular", "--max-disparity", "4", "--reference", "rig",
-                 "--out", str(tmp_path / "o")]) == 0
+                 "--out", str(tmp_path / "o"), "--overwrite"]) == 0
     assert engine[1]["rig"].offsets == rigfile.load("binocular").offsets
     assert engine[1]["max_disparity"] == 4.0 and engine[1]["frames"].shape == (2, 16, 16)
 

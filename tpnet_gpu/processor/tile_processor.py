@@ -14,9 +14,17 @@ buffer (~1 GB at 2592x1936 quad) exists only with ``clt=True`` or ``textures=Tru
 tiles first when the last targets have not been converted (after a fused ``measure``), so measuring passes stay
 fused on a texturing processor. Both paths give the same correlations, layers and masks (tests compare each to
 the float64 reference); without the buffer ``result.clt`` is None.
+
+Threads: a processor belongs to the thread that first gives it work (``load``, ``set_targets`` or a stage); a
+call from any other thread while that one is alive raises ``RuntimeError`` - its results are views that another
+thread's call would overwrite under it (issue 16: two threads got each other's results). A caller may keep the
+views until its own next call on the processor; to keep them longer, or to hand them to another thread, clone
+them. Build one processor per thread (launches of several processors are serialised by the backends).
 """
 
 from __future__ import annotations
+
+import threading
 
 import torch
 import warp as wp
@@ -100,6 +108,8 @@ class TileProcessor:
         self._masked = False  # the last targets came with an active mask
         self._ideal = True  # the last targets were disparities (centres computed on the device)
         self._frame_count = 0
+        self._owner: threading.Thread | None = None  # the thread whose calls the result views belong to
+        self._owner_lock = threading.Lock()  # two first calls at once: one of them becomes the owner
         if self.device.is_cuda:  # the zero-fills above must finish before a user's side stream writes inputs
             wp.synchronize_device(self.device)
 
@@ -136,6 +146,7 @@ class TileProcessor:
                 device or numpy array, any real dtype. A float32 contiguous tensor on the processor's device is
                 read in place (without graphs); anything else is copied into the processor's staging buffer.
         """
+        self._claim("load")
         frames = validate.frames(frames, self.geometry)
         b = self._buffers
         in_place = (not self.graph and frames.dtype == torch.float32 and frames.device == b.torch_device
@@ -148,6 +159,7 @@ class TileProcessor:
 
     def set_targets(self, target_disparity=None, *, centres=None, active=None) -> None:
         """Copy one pass's targets into the processor's buffers (see ``measure`` for the arguments)."""
+        self._claim("set_targets")
         validate.targets(target_disparity, centres)
         geo, b = self.geometry, self._buffers
         mask = validate.active(active, geo)
@@ -197,7 +209,22 @@ class TileProcessor:
         """The steps of one measurement: split when the CLT tiles are kept, else fused."""
         return ("convert", "correlate") if self.keeps_clt else ("fused",)
 
+    def _claim(self, call: str) -> None:
+        """Make the calling thread the owner, or refuse while another living thread owns the processor."""
+        me = threading.current_thread()
+        if self._owner is me:
+            return
+        with self._owner_lock:
+            owner = self._owner
+            if owner is not None and owner is not me and owner.is_alive():
+                raise RuntimeError(
+                    f"{call}: this TileProcessor belongs to thread {owner.name!r} (its results are views of the "
+                    f"processor's buffers that a call from thread {me.name!r} would overwrite); build one "
+                    "processor per thread")
+            self._owner = me
+
     def _run(self, steps: tuple[str, ...]) -> None:
+        self._claim("/".join(steps))
         if self._ideal and ("convert" in steps or "fused" in steps):
             steps = ("centres", *steps)
         self._backend.run(steps, frames=None, masked=self._masked)
