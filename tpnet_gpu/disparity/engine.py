@@ -23,7 +23,7 @@ from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConf
 from tpnet_gpu.disparity.measure import Measurer, row_chunks
 from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs
 from tpnet_gpu.disparity.volume import CostVolume, aggregate, pick
-from tpnet_gpu.processor import TileProcessor
+from tpnet_gpu.processor import TileProcessor, validate
 
 # First stage: every SPARSE-th tile in each direction sweeps the whole range at full resolution. (Binned frames
 # were cheaper but alias fine periodic textures into false matches the local pass cannot leave: 24 rendered
@@ -230,7 +230,7 @@ class DisparityEngine:
     def normalise(self, frames) -> torch.Tensor:
         """Frames ``(cams, H, W)`` as float32 on the device, scaled so their mean |value| is ``REFERENCE_LEVEL``
         (a device scalar: no host round trip); ``self.scale`` keeps the factor (1 for all-zero frames)."""
-        frames_t = frames if isinstance(frames, torch.Tensor) else torch.from_numpy(np.asarray(frames))
+        frames_t = validate.frames(frames, self.tp.geometry)  # before the cast: a complex frame is refused
         frames_t = frames_t.to(self.device, torch.float32)
         level = torch.nan_to_num(frames_t, nan=0.0, posinf=0.0, neginf=0.0).abs().mean()
         self.scale = torch.where(level > 0, REFERENCE_LEVEL / level, torch.ones_like(level))

@@ -107,6 +107,8 @@ def kernels(value, geo: Geometry) -> np.ndarray | None:
 def _tensor(name: str, value, shape: tuple, axes: str, kinds: str) -> torch.Tensor:
     """``value`` as a torch tensor of ``shape`` (NumPy arrays are wrapped, not copied)."""
     if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "biufc":  # torch.from_numpy's own message would not name the argument
+            raise TypeError(f"{name}: expected numbers, got a numpy array of {value.dtype}")
         value = torch.from_numpy(value)
     if not isinstance(value, torch.Tensor):
         raise TypeError(f"{name}: expected {kinds}, got {type(value).__name__}")

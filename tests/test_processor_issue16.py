@@ -1,0 +1,104 @@
+"""Issue 16 regressions of TileProcessor (each named after the failure the fuzz campaign found).
+Oracles: the argument rules of the processor's docstrings (refusals), a single-threaded run of the same frames
+(threads), the float64 golden reference (huge pixel values; tolerance: the kernel tests' 1e-4 of the peak)."""
+
+import os
+import subprocess
+import sys
+import textwrap
+import threading
+
+import numpy as np
+import pytest
+import torch
+
+from tests.kernels.oracle import reference_clt, reference_corr
+from tpnet_gpu import tables
+from tpnet_gpu.processor import TileProcessor
+
+H, W = 32, 48
+
+
+@pytest.fixture
+def frames():
+    return np.random.default_rng(16).uniform(0, 4000, size=(4, H, W)).astype(np.float32)
+
+
+@pytest.mark.parametrize("grid", [(0, 2), (1, 0)], ids=["no-rows", "no-cols"])
+def test_issue16_zero_sized_kernel_grid_is_refused_not_a_crash(tmp_path, backend, grid):
+    # In a subprocess: before the fix process() read an empty kernel buffer and died of SIGSEGV (Taichi's debug
+    # mode hung). Now the constructor refuses the grid with a message naming the argument and the form.
+    script = tmp_path / "kernels.py"
+    script.write_text(textwrap.dedent(f"""
+        import numpy as np
+        from tpnet_gpu.processor import TileProcessor
+        try:
+            tp = TileProcessor(32, 48, kernels=np.ones((4, {grid[0]}, {grid[1]}, 3, 4, 8, 8), np.float32),
+                               device="cpu", backend="{backend}")
+            tp.process(np.ones((4, 32, 48), np.float32), 0.0)
+        except ValueError as exc:
+            print("refused:", exc)
+    """))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "TPNET_TAICHI_DEBUG": "1"})
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "refused: kernels: expected shape (cams=4, [rows >= 1, cols >= 1,] colours=3, 4, 8, 8), got (4, " \
+           f"{grid[0]}, {grid[1]}, 3, 4, 8, 8)" in done.stdout
+
+
+def test_issue16_complex_kernels_are_refused():
+    with pytest.raises(TypeError, match="kernels: expected real values .* got complex64"):
+        TileProcessor(H, W, kernels=np.ones((4, 3, 4, 8, 8), np.complex64), device="cpu")
+
+
+def test_issue16_transposed_active_mask_is_refused(frames, backend):
+    # A (tiles_x, tiles_y) mask has the right size but selects the wrong tiles; the flat (tiles,) form is the
+    # row-major grid (oracle: the (tiles_y, tiles_x) mask's result).
+    tp = TileProcessor(H, W, device="cpu", backend=backend)
+    grid = np.zeros((H // 8, W // 8), dtype=bool)
+    grid[1, 2:5] = True
+    with pytest.raises(ValueError, match=r"active: expected a bool mask of shape \(4, 6\) .* got torch.bool of "
+                                         r"shape \(6, 4\)"):
+        tp.process(frames, 0.0, active=np.ascontiguousarray(grid.T))
+    want = tp.process(frames, 0.0, active=grid).corr.clone()
+    torch.testing.assert_close(tp.process(frames, 0.0, active=grid.reshape(-1)).corr, want, rtol=0, atol=0)
+
+
+def test_issue16_shared_processor_never_swaps_results_between_threads(frames, backend):
+    # Before: two threads sharing one processor got each other's results in 19-44 % of calls. Now the thread
+    # that first gives it work owns it; another living thread is refused with a RuntimeError, and once the
+    # owner has ended another thread may take it over. Oracle: each frame's single-threaded result.
+    other = frames[:, ::-1].copy()
+    tp = TileProcessor(H, W, device="cpu", backend=backend)
+    want = {name: tp.process(f, 1.0).corr.clone() for name, f in (("a", frames), ("b", other))}
+    got, errors, started, release = {}, [], threading.Event(), threading.Event()
+
+    def owner():
+        got["a"] = own.process(frames, 1.0).corr.clone()
+        started.set()
+        release.wait(60)
+        got["a again"] = own.process(frames, 1.0).corr.clone()
+
+    def intruder():
+        try:
+            own.process(other, 1.0)
+        except RuntimeError as exc:
+            errors.append(str(exc))
+
+    own = TileProcessor(H, W, device="cpu", backend=backend)
+    first = threading.Thread(target=owner, name="owner")
+    first.start()
+    started.wait(60)
+    second = threading.Thread(target=intruder, name="intruder")
+    second.start()
+    second.join(60)
+    release.set()
+    first.join(60)
+    assert len(errors) == 1 and "belongs to thread 'owner'" in errors[0] and "'intruder'" in errors[0], errors
+    torch.testing.assert_close(got["a"], want["a"], rtol=0, atol=0)
+    torch.testing.assert_close(got["a again"], want["a"], rtol=0, atol=0)
+    # The owner has ended: a later thread takes the processor over and gets its own results.
+    later = threading.Thread(target=lambda: got.__setitem__("b", own.process(other, 1.0).corr.clone()))
+    later.start()
+    later.join(60)
+    torch.testing.assert_close(got["b"], want["b"], rtol=0, atol=0)
