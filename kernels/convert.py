@@ -12,8 +12,10 @@ most 4 dimensions; torch views it as (tiles, cams, colours, 4, 8, 8)).
 import warp as wp
 
 from tpnet_gpu.kernels.frames import CENTRE_LIMIT, HALF_WINDOW, window_corner
+from tpnet_gpu.layout import PIXEL_LIMIT
+from tpnet_gpu.warp_setup import kernel_module_options
 
-wp.set_module_options({"enable_backward": False})
+wp.set_module_options(kernel_module_options())  # hashed with every kernel source (warp_setup)
 
 
 # --- element functions --------------------------------------------------------------------------------------
@@ -35,14 +37,16 @@ def basis_sin(k: float, n: float, s: float) -> float:
 
 @wp.func
 def finite_or_zero(v: float) -> float:
-    if wp.isfinite(v):
+    """A pixel, or 0 where it is not finite or beyond PIXEL_LIMIT (the comparison is False for NaN)."""
+    if wp.abs(v) <= PIXEL_LIMIT:
         return v
     return 0.0
 
 
 @wp.func
 def non_finite(v: float) -> float:
-    if wp.isfinite(v):
+    """1 where a pixel is not finite or beyond PIXEL_LIMIT, else 0."""
+    if wp.abs(v) <= PIXEL_LIMIT:
         return 0.0
     return 1.0
 

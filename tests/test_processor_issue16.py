@@ -102,3 +102,39 @@ def test_issue16_shared_processor_never_swaps_results_between_threads(frames, ba
     later.start()
     later.join(60)
     torch.testing.assert_close(got["b"], want["b"], rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("cfa", [None, "GRBG"], ids=["mono", "bayer"])
+def test_issue16_huge_pixel_values_give_the_reference_or_an_invalid_tile(frames, backend, cfa):
+    # Before: pixels >= ~1e11 gave all-zero correlations (the squares in the fat-zero norm overflowed float32),
+    # >= ~1e19 NaN, on tiles marked valid. Oracle: the float64 reference within the kernel tests' 1e-4 of the
+    # peak up to layout.PIXEL_LIMIT (2^50); beyond it a pixel counts as not finite: its tiles are invalid and
+    # their correlations zero.
+    tp = TileProcessor(H, W, cfa=cfa, device="cpu", backend=backend)
+    for gain in (1e11, 2.0**38):
+        f = frames * np.float32(gain)
+        out = tp.process(f, 1.5)
+        valid = out.valid.numpy()
+        want = reference_corr(reference_clt(f, out.centres.numpy(), cfa), tables.QUAD_PAIRS)[valid]
+        assert valid.sum() == 8  # the interior tiles (4 x 6 grid, windows of the outer ring leave the image)
+        assert np.abs(out.corr.numpy()[valid] - want).max() <= 1e-4 * np.abs(want).max()
+    for gain in (1e19, 2.0**51):
+        out = tp.process(frames * np.float32(gain), 1.5)
+        assert not out.valid.numpy().any() and np.all(out.corr.numpy() == 0)
+
+
+def test_issue16_kernel_modules_are_hashed_with_every_kernel_source():
+    # Warp 1.19 leaves the functions given to tile_map out of a module's content hash, so a warm cache served
+    # stale code after such an edit. Oracle: a digest of kernels/*.py made here, in every module's options.
+    import hashlib
+    from pathlib import Path
+
+    import warp as wp
+
+    from tpnet_gpu.processor.warp_backend import KERNEL_MODULES
+
+    digest = hashlib.sha256()
+    for path in sorted((Path(__file__).resolve().parents[1] / "kernels").glob("*.py")):
+        digest.update(path.name.encode() + path.read_bytes())
+    for module in KERNEL_MODULES:
+        assert wp.get_module(module.__name__).options["kernel_sources"] == digest.hexdigest()[:16]
