@@ -112,6 +112,21 @@ def axis_basis(s: ti.f32, window_parts: ti.template(), phase_parts: ti.template(
 
 
 @ti.func
+def window_featured(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32) -> ti.i32:
+    """1 unless every pixel of the window (non-finite or beyond PIXEL_LIMIT read as 0) equals the first: a
+    featureless window is not valid (as kernels/convert.convert_camera)."""
+    first = padded[cam, oy, ox]
+    first = ti.select(is_pixel(first), first, 0.0)
+    featured = 0
+    for r in range(WINDOW):
+        for c in ti.static(range(WINDOW)):
+            v = padded[cam, oy + r, ox + c]
+            if ti.select(is_pixel(v), v, 0.0) != first:
+                featured = 1
+    return featured
+
+
+@ti.func
 def forward_colour(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32, masks: ti.template(), mask: ti.i32,
                    bx: ti.template(), by: ti.template()):
     """(16, 16) ``g`` of one colour (module docstring): sum over rows r of by[r, :]^T (x[r, :] bx), x the masked
@@ -205,7 +220,7 @@ def convert_tiles(
             for cam in range(cams):
                 win = camera_window(centres, tile, cam, image_height, image_width, kernel_rows, kernel_cols)
                 all_finite *= win.finite * window_finite(padded, cam, win.oy, win.ox)
-                all_inside *= win.inside
+                all_inside *= win.inside * window_featured(padded, cam, win.oy, win.ox)
                 bx = axis_basis(win.sx, window_parts, phase_parts)
                 by = axis_basis(win.sy, window_parts, phase_parts)
                 for colour in range(colours):

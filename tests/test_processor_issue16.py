@@ -138,3 +138,26 @@ def test_issue16_kernel_modules_are_hashed_with_every_kernel_source():
         digest.update(path.name.encode() + path.read_bytes())
     for module in KERNEL_MODULES:
         assert wp.get_module(module.__name__).options["kernel_sources"] == digest.hexdigest()[:16]
+
+
+@pytest.mark.parametrize("level", [65535.0, 16383.0], ids=["16-bit", "14-bit"])
+def test_issue16_saturated_frames_match_the_reference_or_are_invalid(backend, level):
+    # Before: all-saturated mono frames with one dark pixel gave pair peaks of 0.47 where the float64 reference
+    # gives 0.0625, on tiles marked valid - the tiles where some camera's window is constant (clipped), whose
+    # correlation is float32 rounding noise against the absolute fat zero (tile_processor.md §6.7). Now such
+    # tiles are invalid; on the valid ones the result is the reference's within 1e-4 of its peak.
+    frames = np.full((4, H, W), level, np.float32)
+    frames[:, 13, 20] = 0.0
+    tp = TileProcessor(H, W, cfa=None, device="cpu", backend=backend)
+    for target in (0.0, 1.5, -2.25, 3.7):
+        out = tp.process(frames, target)
+        valid = out.valid.numpy()
+        centres = out.centres.numpy()
+        for t in np.flatnonzero(valid):  # oracle of "featured": every camera's window holds the dark pixel
+            corners = np.floor(centres[t] - 8 + 0.5).astype(int)
+            assert all(x <= 20 < x + 16 and y <= 13 < y + 16 for x, y in corners)
+        want = reference_corr(reference_clt(frames, centres, None), tables.QUAD_PAIRS)[valid]
+        assert valid.any()
+        assert np.abs(out.corr.numpy()[valid] - want).max() <= 1e-4 * np.abs(want).max()
+    flat = tp.process(np.full((4, H, W), level, np.float32), 0.0)  # a flat field: no tile is valid
+    assert not flat.valid.numpy().any()

@@ -5,9 +5,11 @@ Drawn: frame size, mono or Bayer, dtype, pixel magnitude (0, tiny, ordinary, 16-
 1e9, NaN, inf, per tile or one number), aberration-kernel grids and active masks. Oracles:
 * nothing raises (every drawn input is of a documented form);
 * ``valid`` exactly as documented (tile_processor.md §1.4), recomputed here from the frames, the mask and the
-  centres the processor used: active, centres finite, each window wholly inside the image and its pixels finite
-  and at most ``PIXEL_LIMIT``; the centres themselves are the ideal rig's c - d r_i (1e-3 px, float32);
-* correlations finite everywhere and zero on tiles that are not finite (here: invalid tiles inside the image);
+  centres the processor used: active, centres finite, each window wholly inside the image, not featureless
+  (all pixels equal) and its pixels finite and at most ``PIXEL_LIMIT``; the centres themselves are the ideal
+  rig's c - d r_i (1e-3 px, float32);
+* correlations finite everywhere and zero on tiles that are surely not finite (inactive, a non-finite centre,
+  a bad pixel in a window inside the image);
 * Warp = Taichi on valid tiles of textured frames up to 16-bit levels (well conditioned, §6.7), within 1e-3 of
   the peak (float32 rounding differs between the backends; measured: all of 400 derandomized examples within
   1e-5). Featureless (constant) frames are left out of this one: at 16-bit levels they are ill-conditioned.
@@ -77,13 +79,15 @@ def cases(draw):
 
 
 def _windows(case, centres):
-    """Per tile: (active with finite centres, every window inside the image, an inside window holds a pixel that
-    is not finite or beyond PIXEL_LIMIT), from the frames, the mask and the centres ``(tiles, cams, 2)``."""
+    """Per tile: (active with finite centres, every window inside the image and none of them featureless - all
+    pixels equal, unusable ones read as 0 -, an inside window holds a pixel that is not finite or beyond
+    PIXEL_LIMIT), from the frames, the mask and the centres ``(tiles, cams, 2)``."""
     frames = case["frames"].astype(np.float64)
     height, width = case["height"], case["width"]
     tiles = centres.shape[0]
     active = np.ones(tiles, bool) if case["active"] is None else case["active"].reshape(-1)
     usable, inside, bad = np.zeros(tiles, bool), np.ones(tiles, bool), np.zeros(tiles, bool)
+    flat = np.zeros(tiles, bool)
     for t in range(tiles):
         usable[t] = active[t] and np.isfinite(centres[t]).all()
         if not usable[t]:
@@ -94,12 +98,15 @@ def _windows(case, centres):
             if x0 < 0 or y0 < 0 or x0 + 16 > width or y0 + 16 > height:
                 inside[t] = False
                 continue
-            bad[t] |= not np.all(np.abs(frames[cam, y0:y0 + 16, x0:x0 + 16]) <= PIXEL_LIMIT)
-    return usable, inside, bad
+            window = frames[cam, y0:y0 + 16, x0:x0 + 16]
+            ok = np.abs(window) <= PIXEL_LIMIT
+            bad[t] |= not ok.all()
+            flat[t] |= np.all(np.where(ok, window, 0.0) == (window[0, 0] if ok[0, 0] else 0.0))
+    return usable, inside & ~flat, bad
 
 
 def _expected_valid(case, centres):
-    """tile_processor.md §1.4: active, centres finite, windows inside the image, their pixels usable."""
+    """tile_processor.md §1.4: active, centres finite, windows inside the image, featured, their pixels usable."""
     usable, inside, bad = _windows(case, centres)
     return usable & inside & ~bad
 
