@@ -12,8 +12,10 @@ most 4 dimensions; torch views it as (tiles, cams, colours, 4, 8, 8)).
 import warp as wp
 
 from tpnet_gpu.kernels.frames import CENTRE_LIMIT, HALF_WINDOW, window_corner
+from tpnet_gpu.layout import PIXEL_LIMIT
+from tpnet_gpu.warp_setup import kernel_module_options
 
-wp.set_module_options({"enable_backward": False})
+wp.set_module_options(kernel_module_options())  # hashed with every kernel source (warp_setup)
 
 
 # --- element functions --------------------------------------------------------------------------------------
@@ -35,14 +37,21 @@ def basis_sin(k: float, n: float, s: float) -> float:
 
 @wp.func
 def finite_or_zero(v: float) -> float:
-    if wp.isfinite(v):
+    """A pixel, or 0 where it is not finite or beyond PIXEL_LIMIT (the comparison is False for NaN)."""
+    if wp.abs(v) <= PIXEL_LIMIT:
         return v
     return 0.0
 
 
 @wp.func
+def abs_difference(a: float, b: float) -> float:
+    return wp.abs(a - b)
+
+
+@wp.func
 def non_finite(v: float) -> float:
-    if wp.isfinite(v):
+    """1 where a pixel is not finite or beyond PIXEL_LIMIT, else 0."""
+    if wp.abs(v) <= PIXEL_LIMIT:
         return 0.0
     return 1.0
 
@@ -98,7 +107,9 @@ def convert_camera(
 ):
     """Camera ``cam``'s window of ``tile``, converted for the colours colour_list[u] into dest[dest_base + 4 u + q]
     (the split kernel: every colour into the CLT buffer; the fused one: the used colours into its scratch).
-    Returns (finite: every pixel and the centre finite, inside: the window wholly inside the image)."""
+    Returns (finite: every pixel and the centre finite, measurable: the window wholly inside the image and not
+    featureless - not all of its (zero-filled) pixels equal: a clipped highlight or flat field has no feature to
+    correlate, and at 16-bit levels its correlation is float32 rounding noise; tile_processor.md §6.7)."""
     finite = bool(True)
     inside = bool(True)
     cx = centres[tile, cam, 0]
@@ -122,6 +133,10 @@ def convert_camera(
     if wp.tile_extract(bad, 0) > 0.0:
         finite = False
     window = wp.tile_map(finite_or_zero, window)
+    first = wp.tile_full(shape=(16, 16), value=wp.tile_extract(window, 0, 0), dtype=wp.float32)
+    spread = wp.tile_sum(wp.tile_map(abs_difference, window, first))
+    if wp.tile_extract(spread, 0) == 0.0:
+        inside = False
     # Per-axis bases: rows (8, 16) for the vertical transform, transposed (16, 8) for the horizontal one.
     kr = wp.tile_load(k_rows, shape=(8, 16))
     nr = wp.tile_load(n_rows, shape=(8, 16))
@@ -159,7 +174,7 @@ def convert_camera(
             wp.tile_store(dest[out + 1], f1)
             wp.tile_store(dest[out + 2], f2)
             wp.tile_store(dest[out + 3], f3)
-    return finite, inside
+    return finite, inside  # inside: also featured (docstring)
 
 
 # --- kernel -------------------------------------------------------------------------------------------------
@@ -189,7 +204,7 @@ def convert_tiles(
     (cams * kernel_rows * kernel_cols * colours * 4, 8, 8); colour_list: (colours,) 0..colours-1; clt out as in
     the module docstring; finite/valid: (tiles,) - finite: every window and centre finite (else the tile's CLT
     is zero); valid: finite, active and every window wholly inside the image (else its pixels were read
-    pair-clamped)."""
+    pair-clamped) and not featureless (``convert_camera``)."""
     tile = wp.tid()
     if not active[tile]:
         finite[tile] = False

@@ -12,7 +12,10 @@ Layouts: ``clt`` (tiles * cams * colours * 4, 8, 8); ``corr`` (tiles * pairs, 2r
 
 import warp as wp
 
-wp.set_module_options({"enable_backward": False})
+from tpnet_gpu.layout import FLOAT32_MAX
+from tpnet_gpu.warp_setup import kernel_module_options
+
+wp.set_module_options(kernel_module_options())  # hashed with every kernel source (warp_setup)
 
 CORR_SIDE = 15  # 2 r + 1 with r = 7 (lag +-8 is dropped)
 NET_SIDE = 9
@@ -42,10 +45,14 @@ def xcorr_ss(a0: float, a1: float, a2: float, a3: float, b0: float, b1: float, b
 
 @wp.func
 def inverse_norm(x0: float, x1: float, x2: float, x3: float, fat_zero: float) -> float:
-    """1 / sqrt(fz^2 + sum_q X_q^2), or 0 where that is 0 (fz = 0 and no energy at this frequency)."""
-    n2 = fat_zero * fat_zero + x0 * x0 + x1 * x1 + x2 * x2 + x3 * x3
-    if n2 > 0.0:
-        return 1.0 / wp.sqrt(n2)
+    """1 / sqrt(fz^2 + sum_q X_q^2), or 0 where that is 0 (fz = 0 and no energy at this frequency). Computed as
+    r / sqrt(sum (x r)^2) with r = 1 / max(fz, |X_q|): the squares of large products would overflow float32
+    (issue 16: pixels >= 1e11 gave all-zero correlations) and those of small ones underflow."""
+    m = wp.max(wp.max(wp.max(wp.abs(x0), wp.abs(x1)), wp.max(wp.abs(x2), wp.abs(x3))), fat_zero)
+    if m > 0.0 and m <= FLOAT32_MAX:
+        r = 1.0 / m
+        f, a, b, c, d = fat_zero * r, x0 * r, x1 * r, x2 * r, x3 * r
+        return r / wp.sqrt(f * f + a * a + b * b + c * c + d * d)
     return 0.0
 
 

@@ -5,6 +5,8 @@ Per-thread kernels (no tiles): they touch every pixel or every (tile, camera) on
 
 import warp as wp
 
+from tpnet_gpu.warp_setup import kernel_module_options
+
 # Margin of the padded frames. Even, so padding keeps the Bayer parity; >= 17, so that *any* integer window
 # corner can be moved onto the padded frame without changing what the pair-preserving clamp reads (see
 # ``window_corner``): every index left of the image reads q & 1, every index right of it reads size - 2 + (q & 1).
@@ -15,7 +17,7 @@ TILE_STEP = 8
 # Centres further than this from the image (pixels) are clamped before rounding (int32 safety only).
 CENTRE_LIMIT = 1.0e6
 
-wp.set_module_options({"enable_backward": False})
+wp.set_module_options(kernel_module_options())  # hashed with every kernel source (warp_setup)
 
 
 @wp.func

@@ -17,8 +17,9 @@ import warp as wp
 
 from tpnet_gpu.kernels.convert import convert_camera
 from tpnet_gpu.kernels.correlate import correlate_pair, zero_correlations
+from tpnet_gpu.warp_setup import kernel_module_options
 
-wp.set_module_options({"enable_backward": False})
+wp.set_module_options(kernel_module_options())  # hashed with every kernel source (warp_setup)
 
 
 @wp.kernel

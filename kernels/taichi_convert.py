@@ -23,6 +23,7 @@ import taichi as ti
 from tpnet_gpu.kernels.frames import CENTRE_LIMIT, HALF_WINDOW, WINDOW
 from tpnet_gpu.kernels.taichi_frames import window_corner
 from tpnet_gpu.kernels.taichi_types import F32_2D, F32_3D, U8_1D
+from tpnet_gpu.layout import FLOAT32_MAX, PIXEL_LIMIT
 from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
 
 # Where one camera's window lies: padded-frame corner, residual shifts, Bayer parity, kernel-grid node, flags.
@@ -33,7 +34,13 @@ CameraWindow = ti.types.struct(oy=ti.i32, ox=ti.i32, sx=ti.f32, sy=ti.f32, parit
 # --- element functions --------------------------------------------------------------------------------------
 @ti.func
 def is_finite(v: ti.f32) -> bool:
-    return ti.abs(v) <= 3.4028234e38  # False for NaN and +-inf
+    return ti.abs(v) <= FLOAT32_MAX  # False for NaN and +-inf
+
+
+@ti.func
+def is_pixel(v: ti.f32) -> bool:
+    """A pixel the products can take: finite and at most PIXEL_LIMIT in magnitude (False for NaN)."""
+    return ti.abs(v) <= PIXEL_LIMIT
 
 
 @ti.func
@@ -68,11 +75,11 @@ def camera_window(centres: ti.template(), tile: ti.i32, cam: ti.i32, image_heigh
 
 @ti.func
 def window_finite(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32) -> ti.i32:
-    """1 when every pixel of the 16 x 16 window at (oy, ox) is finite."""
+    """1 when every pixel of the 16 x 16 window at (oy, ox) is finite and at most PIXEL_LIMIT (``is_pixel``)."""
     finite = 1
     for r in range(WINDOW):
         for c in ti.static(range(WINDOW)):
-            if not is_finite(padded[cam, oy + r, ox + c]):
+            if not is_pixel(padded[cam, oy + r, ox + c]):
                 finite = 0
     return finite
 
@@ -105,6 +112,21 @@ def axis_basis(s: ti.f32, window_parts: ti.template(), phase_parts: ti.template(
 
 
 @ti.func
+def window_featured(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32) -> ti.i32:
+    """1 unless every pixel of the window (non-finite or beyond PIXEL_LIMIT read as 0) equals the first: a
+    featureless window is not valid (as kernels/convert.convert_camera)."""
+    first = padded[cam, oy, ox]
+    first = ti.select(is_pixel(first), first, 0.0)
+    featured = 0
+    for r in range(WINDOW):
+        for c in ti.static(range(WINDOW)):
+            v = padded[cam, oy + r, ox + c]
+            if ti.select(is_pixel(v), v, 0.0) != first:
+                featured = 1
+    return featured
+
+
+@ti.func
 def forward_colour(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32, masks: ti.template(), mask: ti.i32,
                    bx: ti.template(), by: ti.template()):
     """(16, 16) ``g`` of one colour (module docstring): sum over rows r of by[r, :]^T (x[r, :] bx), x the masked
@@ -120,7 +142,7 @@ def forward_colour(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32, m
                 if weight != 0.0:
                     for j in ti.static(range(N)):
                         v = padded[cam, oy + r, ox + 2 * j + phase]
-                        x = ti.select(is_finite(v), weight * v, 0.0)
+                        x = ti.select(is_pixel(v), weight * v, 0.0)
                         for k in ti.static(range(WINDOW)):
                             t[k] += x * bx[2 * j + phase, k]
             for i in ti.static(range(WINDOW)):
@@ -198,7 +220,7 @@ def convert_tiles(
             for cam in range(cams):
                 win = camera_window(centres, tile, cam, image_height, image_width, kernel_rows, kernel_cols)
                 all_finite *= win.finite * window_finite(padded, cam, win.oy, win.ox)
-                all_inside *= win.inside
+                all_inside *= win.inside * window_featured(padded, cam, win.oy, win.ox)
                 bx = axis_basis(win.sx, window_parts, phase_parts)
                 by = axis_basis(win.sy, window_parts, phase_parts)
                 for colour in range(colours):

@@ -22,7 +22,7 @@ import taichi as ti
 from tpnet_gpu import operators
 from tpnet_gpu.kernels.correlate import CORR_SIDE, NET_CROP
 from tpnet_gpu.kernels.taichi_types import F32_1D, F32_2D, F32_3D, F32_4D, I32_1D, I32_2D, U8_1D
-from tpnet_gpu.layout import NET_LAYERS, NET_SIDE
+from tpnet_gpu.layout import FLOAT32_MAX, NET_LAYERS, NET_SIDE
 from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
 
 HALF_DTT2E = operators.half_dtt2e().tolist()  # [sine][m][k], compile-time constants
@@ -42,11 +42,14 @@ def lag_col(q: int, c: int) -> int:
 
 @ti.func
 def inverse_norm(x0: ti.f32, x1: ti.f32, x2: ti.f32, x3: ti.f32, fat_zero: ti.f32) -> ti.f32:
-    """1 / sqrt(fz^2 + sum_q X_q^2), or 0 where that is 0 (fz = 0 and no energy at this frequency)."""
-    n2 = fat_zero * fat_zero + x0 * x0 + x1 * x1 + x2 * x2 + x3 * x3
+    """1 / sqrt(fz^2 + sum_q X_q^2), or 0 where that is 0; scaled by r = 1 / max(fz, |X_q|) first, as the Warp
+    kernel (kernels/correlate.py: no overflow of the squares of large products)."""
+    m = ti.max(ti.abs(x0), ti.abs(x1), ti.abs(x2), ti.abs(x3), fat_zero)
     out = 0.0
-    if n2 > 0.0:
-        out = 1.0 / ti.sqrt(n2)
+    if m > 0.0 and m <= FLOAT32_MAX:
+        r = 1.0 / m
+        f, a, b, c, d = fat_zero * r, x0 * r, x1 * r, x2 * r, x3 * r
+        out = r / ti.sqrt(f * f + a * a + b * b + c * c + d * d)
     return out
 
 

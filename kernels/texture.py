@@ -17,7 +17,9 @@ pixel u at canvas u + 4.
 
 import warp as wp
 
-wp.set_module_options({"enable_backward": False})
+from tpnet_gpu.warp_setup import kernel_module_options
+
+wp.set_module_options(kernel_module_options())  # hashed with every kernel source (warp_setup)
 
 
 @wp.kernel

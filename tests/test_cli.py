@@ -5,8 +5,11 @@ their call and return known tile maps (the disparity engine of issue 13 is not t
 rules of docs/rig_file.md §8."""
 
 import json
+import signal
 import subprocess
 import sys
+import textwrap
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -139,7 +142,8 @@ def test_one_shot_backend_and_threads_follow_the_frame_size(tmp_path, engine):
     (tmp_path / "big").mkdir()
     small, big = _pair(tmp_path, (240, 320)), _pair(tmp_path / "big", (240, 328))
     for images, backend in ((small, []), (big, []), (small, ["--backend", "taichi"])):
-        assert main(["process", *images, "--max-disparity", "4", "--out", str(tmp_path / "o"), *backend]) == 0
+        assert main(["process", *images, "--max-disparity", "4", "--out", str(tmp_path / "o"), "--overwrite",
+                     *backend]) == 0
     assert [(c["height"] * c["width"], c["backend"]) for c in engine] == [(76800, "warp"), (78720, None),
                                                                           (76800, "taichi")]
     assert [c["torch_threads"] for c in engine] == [1, threads, 1] and torch.get_num_threads() == threads
@@ -156,7 +160,7 @@ def test_process_rig_of_images_through_the_engine(tmp_path, engine):
                  "--reference", "2"]) == 0
     assert engine[0]["rig"].offsets == ((-0.5, -0.75), (0.5, -0.75), (0.0, 0.0))
     assert main(["process", *images[:2], "--rig", "binocular", "--max-disparity", "4", "--reference", "rig",
-                 "--out", str(tmp_path / "o")]) == 0
+                 "--out", str(tmp_path / "o"), "--overwrite"]) == 0
     assert engine[1]["rig"].offsets == rigfile.load("binocular").offsets
     assert engine[1]["max_disparity"] == 4.0 and engine[1]["frames"].shape == (2, 16, 16)
 
@@ -226,3 +230,107 @@ def test_process_photograph_pair_end_to_end(tmp_path, colour):
     assert disparity.shape == (15, 25)
     err = disparity[2:-2, 2:-2] - d
     assert np.isfinite(err).mean() > 0.7 and np.nanmedian(np.abs(err)) <= 0.1
+
+
+# --- issue 16: outputs are never clobbered or half-written ---------------------------------------------------
+def _contents(folder):
+    """name -> bytes of every file under ``folder`` (directories as None): the oracle of "left as it was"."""
+    return {str(p.relative_to(folder)): (None if p.is_dir() else p.read_bytes()) for p in sorted(folder.rglob("*"))}
+
+
+def _no_leftovers(parent):
+    return not [p.name for p in parent.iterdir() if ".tmp-" in p.name or ".old-" in p.name]
+
+
+def test_issue16_process_into_its_own_scene_folder_is_refused(tmp_path, capsys):
+    assert main(["render", str(tmp_path / "s"), "--width", "48", "--height", "32", "--supersample", "1"]) == 0
+    before = _contents(tmp_path / "s")
+    for extra in ([], ["--overwrite"]):  # never over an input, not even with --overwrite
+        assert main(["process", str(tmp_path / "s"), "--out", str(tmp_path / "s"), *extra]) == 2
+        assert "--out: expected a folder apart from the inputs" in capsys.readouterr().err
+    assert _contents(tmp_path / "s") == before  # the ground-truth disparity.tif/.png are the scene's own
+
+
+def test_issue16_second_process_into_the_same_out_needs_overwrite(tmp_path, engine, capsys):
+    left, right = _pair(tmp_path)
+    args = ["process", left, right, "--max-disparity", "4", "--out", str(tmp_path / "o")]
+    assert main(args) == 0
+    (tmp_path / "o" / "notes.txt").write_text("mine")
+    before = _contents(tmp_path / "o")
+    capsys.readouterr()
+    assert main(args) == 2 and len(engine) == 1  # refused before any work
+    assert "--out: expected an empty or new folder (or --overwrite)" in capsys.readouterr().err
+    assert _contents(tmp_path / "o") == before
+    assert main([*args, "--overwrite"]) == 0 and len(engine) == 2
+    assert (tmp_path / "o" / "notes.txt").read_text() == "mine"  # files the output does not replace stay
+    assert _no_leftovers(tmp_path)
+    assert main(["process", left, right, "--max-disparity", "4", "--out", left]) == 2  # a file: refused early
+    assert "--out: expected a folder apart from the inputs" in capsys.readouterr().err
+
+
+def test_issue16_render_over_an_existing_scene_needs_overwrite(tmp_path, capsys):
+    render = ["render", str(tmp_path / "s"), "--width", "48", "--height", "32", "--supersample", "1"]
+    assert main(render) == 0
+    before = _contents(tmp_path / "s")
+    assert main([*render, "--seed", "1"]) == 2
+    assert "out: expected an empty or new folder (or --overwrite)" in capsys.readouterr().err
+    assert _contents(tmp_path / "s") == before
+    assert main([*render, "--seed", "1", "--overwrite"]) == 0
+    assert _contents(tmp_path / "s")["cam0.dng"] != before["cam0.dng"] and _no_leftovers(tmp_path)
+
+
+def test_issue16_failed_write_leaves_the_old_output_whole(tmp_path, engine, monkeypatch, capsys):
+    # Before: with texture.png a directory the command exited 2 after the other four files were written. Now
+    # a non-empty folder is refused up front, and a write that fails half-way leaves the old folder as it was.
+    from tpnet_gpu import images
+
+    left, right = _pair(tmp_path)
+    out = tmp_path / "o"
+    (out / "texture.png").mkdir(parents=True)
+    (out / "disparity.tif").write_bytes(b"old")
+    before = _contents(out)
+    args = ["process", left, right, "--max-disparity", "4", "--out", str(out)]
+    assert main(args) == 2 and _contents(out) == before
+    real = images.save_png
+
+    def failing(path, image):
+        if path.name == "texture.png":
+            raise OSError(f"{path}: disk full")
+        real(path, image)
+
+    monkeypatch.setattr(images, "save_png", failing)
+    assert main([*args, "--overwrite"]) == 2
+    assert "disk full" in capsys.readouterr().err
+    assert _contents(out) == before and _no_leftovers(tmp_path)
+    monkeypatch.setattr(images, "save_png", real)
+    assert main([*args, "--overwrite"]) == 0  # the directory in the way is replaced by the new file
+    assert (out / "texture.png").is_file() and (out / "disparity.tif").read_bytes() != b"old"
+
+
+def test_issue16_killed_run_leaves_the_old_output_whole(tmp_path):
+    # A run killed (SIGKILL) while writing its third file: the old output folder must be untouched.
+    left, right = _pair(tmp_path)
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "disparity.tif").write_bytes(b"old")
+    before = _contents(out)
+    script = tmp_path / "killed.py"
+    root = Path(__file__).resolve().parents[1]
+    script.write_text(textwrap.dedent(f"""
+        import os, signal, sys
+        sys.path.insert(0, {str(root)!r})
+        import tpnet_gpu.pipeline
+        from tpnet_gpu import images
+        from tests.test_cli import RecordingEngine
+        from tpnet_gpu.cli import main
+        tpnet_gpu.pipeline.Pipeline = RecordingEngine
+        real = images.save_png
+        def dying(path, image):
+            real(path, image)
+            os.kill(os.getpid(), signal.SIGKILL)
+        images.save_png = dying
+        main(["process", {left!r}, {right!r}, "--max-disparity", "4", "--out", {str(out)!r}, "--overwrite"])
+    """))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == -signal.SIGKILL, done.stderr[-2000:]
+    assert _contents(out) == before

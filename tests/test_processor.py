@@ -130,7 +130,7 @@ def test_default_backend_is_the_measured_faster_one():
         (dict(pairs=[(0, 4)]), ValueError, r"pairs: expected distinct camera indices in 0..3, got \(0, 4\)"),
         (dict(pairs=[]), ValueError, "pairs: expected at least one"),
         (dict(camera_offsets=[(0, 0, 0)]), ValueError, r"camera_offsets: expected shape \(cams >= 2, 2\)"),
-        (dict(kernels=np.zeros((4, 3, 4, 8))), ValueError, r"kernels: expected shape \(cams=4, \[rows, cols,\] colours=3"),
+        (dict(kernels=np.zeros((4, 3, 4, 8))), ValueError, r"kernels: expected shape \(cams=4, \[rows >= 1, cols >= 1,\] colours=3"),
         (dict(config=CorrelationConfig(colour_weights=(1.0,))), ValueError, "colour_weights: expected 3 values, got 1"),
         (dict(config=CorrelationConfig(fat_zero=-1.0)), ValueError, "fat_zero >= 0 and sigmas > 0 expected"),
         (dict(backend="numba"), ValueError, r"backend: expected one of \('warp', 'taichi'\) or None, got 'numba'"),
@@ -163,7 +163,7 @@ def test_bad_frames_and_tasks(frames, backend):
         tp.process(frames)
     with pytest.raises(ValueError, match=r"centres: expected shape \(24, 4, 2\)"):
         tp.process(frames, centres=np.zeros((24, 4)))
-    with pytest.raises(ValueError, match="active: expected a bool mask of 24 tiles"):
+    with pytest.raises(ValueError, match=r"active: expected a bool mask of shape \(4, 6\) \(tiles_y, tiles_x\) or \(24,\)"):
         tp.process(frames, 0.0, active=np.ones((4, 6), dtype=np.int32))
 
 

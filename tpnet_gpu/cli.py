@@ -1,5 +1,6 @@
 """The ``tpnet`` command line. Each subcommand has ``--help``; bad input ends with a one-line message, not a
-traceback (exit status 2)."""
+traceback (exit status 2). ``demo``, ``process`` and ``render`` write their output folder whole or not at all and
+refuse a non-empty one without ``--overwrite`` (``tpnet_gpu.outputs``)."""
 
 from __future__ import annotations
 
@@ -36,7 +37,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     with _one_shot(args.height, args.width, args.backend) as backend:
         report = run_demo(args.out, width=args.width, height=args.height, seed=args.seed, device=args.device,
-                          backend=backend)
+                          backend=backend, overwrite=args.overwrite)
     print(report["text"])
     return 0
 
@@ -55,19 +56,19 @@ def _disparity(text: str | None, option: str, *, positive: bool) -> float | None
 
 
 def _cmd_process(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     import numpy as np
     import tifffile
 
     from tpnet_gpu.demo import _upscale, texture_rgba
     from tpnet_gpu.images import colour_ramp, save_png
+    from tpnet_gpu.outputs import check, output_folder
     from tpnet_gpu.stereo_io import load_inputs, make_pipeline
 
     max_d = _disparity(args.max_disparity, "--max-disparity", positive=True)
     min_d = _disparity(args.min_disparity, "--min-disparity", positive=False)
     if max_d is not None and min_d >= max_d:
         raise ValueError(f"--min-disparity: expected less than --max-disparity {max_d:g}, got {min_d:g}")
+    out = check(args.out, overwrite=args.overwrite, inputs=args.inputs)  # before the work, not after it
     inputs = load_inputs(args.inputs, rig=args.rig, cfa=args.cfa, colour=args.colour, reference=args.reference)
     if inputs.kind in ("pair", "images") and max_d is None:
         raise ValueError("--max-disparity: required for ordinary images (the largest disparity searched, px)")
@@ -79,20 +80,20 @@ def _cmd_process(args: argparse.Namespace) -> int:
                                  max_disparity=max_d, device=args.device, backend=backend)
         result = pipeline.process(frames.frames)
     seconds = time.perf_counter() - start
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     disparity = frames.crop_tiles(result.disparity.cpu().numpy())
-    tifffile.imwrite(out / "disparity.tif", disparity.astype(np.float32))
-    tifffile.imwrite(out / "confidence.tif", frames.crop_tiles(result.confidence.cpu().numpy()).astype(np.float32))
-    save_png(out / "disparity.png", _upscale(colour_ramp(disparity, min_d))[:h, :w])
-    written = "disparity.tif/.png, confidence.tif"
-    if result.texture is not None:
-        texture = frames.crop_image(result.texture.cpu().numpy())
-        tifffile.imwrite(out / "texture.tif", texture.astype(np.float32), photometric="minisblack")  # planes R G B A
-        written += ", texture.tif"
-        if texture.shape[0] == 4:
-            save_png(out / "texture.png", texture_rgba(texture, float(np.nanpercentile(texture[:3], 99.5))))
-            written += "/.png"
+    with output_folder(out, overwrite=args.overwrite, inputs=args.inputs) as folder:
+        tifffile.imwrite(folder / "disparity.tif", disparity.astype(np.float32))
+        tifffile.imwrite(folder / "confidence.tif",
+                         frames.crop_tiles(result.confidence.cpu().numpy()).astype(np.float32))
+        save_png(folder / "disparity.png", _upscale(colour_ramp(disparity, min_d))[:h, :w])
+        written = "disparity.tif/.png, confidence.tif"
+        if result.texture is not None:
+            texture = frames.crop_image(result.texture.cpu().numpy())
+            tifffile.imwrite(folder / "texture.tif", texture.astype(np.float32), photometric="minisblack")  # RGBA
+            written += ", texture.tif"
+            if texture.shape[0] == 4:
+                save_png(folder / "texture.png", texture_rgba(texture, float(np.nanpercentile(texture[:3], 99.5))))
+                written += "/.png"
     what = {"scene": "scene", "raw": f"raw ({frames.cfa})", "pair": "stereo pair", "images": "image"}[inputs.kind]
     print(f"processed {w}x{h} {what} frame of {frames.cams} cameras in {seconds:.1f} s -> {out}: {written} "
           f"({disparity.shape[1]}x{disparity.shape[0]} tiles)")
@@ -103,9 +104,11 @@ def _cmd_render(args: argparse.Namespace) -> int:
     import numpy as np
 
     from tpnet_gpu.camera import Rig
+    from tpnet_gpu.outputs import check, output_folder
     from tpnet_gpu.scenes import Optics, Sensor, demo_scene, random_scene, render
     from tpnet_gpu.scenes.folder import save
 
+    out = check(args.out, overwrite=args.overwrite, option="out")  # before the work, not after it
     rig = Rig(width=args.width, height=args.height)
     scene = demo_scene(rig, seed=args.seed) if args.scene == "demo" else random_scene(rig, np.random.default_rng(args.seed))
     optics = Optics()
@@ -114,9 +117,10 @@ def _cmd_render(args: argparse.Namespace) -> int:
     rendered = render(scene, rig, optics=optics, sensor=sensor, supersample=args.supersample, seed=args.seed,
                       noise=not args.no_noise, progress=lambda m: print(f"rendering {m}", file=sys.stderr))
     seconds = time.perf_counter() - start
-    folder = save(rendered, args.out, name=f"{args.scene}-{args.seed}", optics=optics)
+    with output_folder(out, overwrite=args.overwrite, option="out") as folder:
+        save(rendered, folder, name=f"{args.scene}-{args.seed}", optics=optics)
     print(f"rendered {args.scene} scene (seed {args.seed}), {rig.cams} cameras of {rig.width}x{rig.height}, "
-          f"supersample {args.supersample}, in {seconds:.1f} s -> {folder}")
+          f"supersample {args.supersample}, in {seconds:.1f} s -> {out}")
     return 0
 
 
@@ -180,6 +184,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 BACKEND_HELP = (f"tile-processor kernels (default: warp for frames of at most {SMALL_FRAME_PIXELS} pixels, whose "
                 "start-up dominates; else taichi on the CPU, warp on CUDA)")
+OVERWRITE_HELP = "replace the files of a non-empty output folder (default: refuse it)"
 BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup")
 
 
@@ -207,6 +212,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=int, default=0, help="seed of the scene and the noise")
     demo.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     demo.add_argument("--backend", choices=BACKENDS, default=None, help=BACKEND_HELP)
+    demo.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     demo.set_defaults(func=_cmd_demo)
 
     proc = sub.add_parser("process", help="disparity, confidence and texture of a frame: scene folder, raw quad, "
@@ -233,6 +239,7 @@ def build_parser() -> argparse.ArgumentParser:
                       "rig are read as ordinary images")
     proc.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     proc.add_argument("--backend", choices=BACKENDS, default=None, help=BACKEND_HELP)
+    proc.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP + "; never an input's folder")
     proc.set_defaults(func=_cmd_process)
 
     rend = sub.add_parser("render", help="render a synthetic quad-camera scene folder (DNGs + ground truth)")
@@ -244,6 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
     rend.add_argument("--supersample", type=int, default=2, help="sub-pixel rays per axis")
     rend.add_argument("--bits", type=int, default=12, choices=(10, 12, 14, 16), help="sensor bit depth")
     rend.add_argument("--no-noise", action="store_true", help="no photon or read noise")
+    rend.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     rend.set_defaults(func=_cmd_render)
 
     insp = sub.add_parser("inspect", help="read a scene folder back (rawpy) and summarise it")

@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import json
 import time
-from pathlib import Path
 
 import numpy as np
 
-from tpnet_gpu import evaluation
+from tpnet_gpu import evaluation, outputs
 from tpnet_gpu.images import colour_ramp, save_png
 
 
@@ -42,14 +41,14 @@ def correlation_sheet(corr: np.ndarray, tiles: list[int], zoom: int = 6) -> np.n
 
 
 def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int = 0, device: str | None = None,
-             backend: str | None = None) -> dict:
-    """Render the demo scene, run the pipeline, write the pictures and the report; returns the report."""
+             backend: str | None = None, overwrite: bool = False) -> dict:
+    """Render the demo scene, run the pipeline, write the pictures and the report into ``out`` (whole or not at
+    all; a non-empty ``out`` only with ``overwrite``: ``tpnet_gpu.outputs``); returns the report."""
     from tpnet_gpu.camera import Rig  # noqa: PLC0415 - heavy imports on use
     from tpnet_gpu.pipeline import Pipeline
     from tpnet_gpu.scenes import Sensor, demo_scene, render
 
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = outputs.check(out, overwrite=overwrite)  # before the work, not after it
     rig = Rig(width=width, height=height)
     start = time.perf_counter()
     rendered = render(demo_scene(rig, seed=seed), rig, sensor=Sensor(), seed=seed)
@@ -70,32 +69,33 @@ def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int =
     stats = {name: {c: evaluation.error_stats(est, gt, mask) for c, mask in classes.items()}
              for name, est in (("tpnet", net), ("disparity engine (network input)", initial))}
     high = float(np.nanpercentile(gt, 99))
-    save_png(out / "disparity.png", _upscale(colour_ramp(net, 0.0, high)))
-    save_png(out / "ground_truth.png", _upscale(colour_ramp(gt, 0.0, high)))
-    save_png(out / "error.png", _upscale(colour_ramp(np.abs(net - gt), 0.0, 0.5)))
-    if result.texture is not None:
-        save_png(out / "texture.png", texture_rgba(result.texture.cpu().numpy(), rendered.sensor.white_level
-                                                   - rendered.sensor.black_level))
-    tiles = [int(np.ravel_multi_index((ty, tx), gt.shape)) for ty, tx in
-             ((gt.shape[0] // 2, gt.shape[1] // 4), (gt.shape[0] * 3 // 4, gt.shape[1] // 2),
-              (gt.shape[0] // 3, gt.shape[1] * 3 // 4))]
-    corr = pipeline.network_tp.result.corr.cpu().numpy()
-    save_png(out / "correlations.png", correlation_sheet(corr, tiles))
-    report = {
-        "scene": f"demo-{seed}", "size": [width, height], "device": str(pipeline.device),
-        "seconds": {"render": t_render, "pipeline_setup": t_setup, "frame": t_frame},
-        "stats": stats,
-        "files": sorted(p.name for p in out.iterdir() if p.suffix == ".png"),
-    }
-    lines = [f"tpnet demo: {width}x{height} quad frame of the built-in scene on {pipeline.device}",
-             f"render {t_render:.1f} s, pipeline set-up {t_setup:.1f} s, one frame {t_frame:.2f} s "
-             f"(disparity engine: {result.tile_passes:.1f} tile passes; network + texture)"]
-    for name, per_class in stats.items():
-        parts = [f"{c} rmse {v['rmse_inliers']:.3f} px (median {v['median_abs']:.3f}, gross {v['gross']:.1%}, "
-                 f"{v['tiles']} tiles)" for c, v in per_class.items() if c in ("flat", "edge")]
-        lines.append(f"  {name}: " + "; ".join(parts))
-    lines.append(f"  wrote {', '.join(report['files'])} and report.json to {out}")
-    (out / "report.json").write_text(json.dumps(report, indent=1))
-    (out / "report.txt").write_text("\n".join(lines) + "\n")
+    with outputs.output_folder(out, overwrite=overwrite) as folder:
+        save_png(folder / "disparity.png", _upscale(colour_ramp(net, 0.0, high)))
+        save_png(folder / "ground_truth.png", _upscale(colour_ramp(gt, 0.0, high)))
+        save_png(folder / "error.png", _upscale(colour_ramp(np.abs(net - gt), 0.0, 0.5)))
+        if result.texture is not None:
+            white = rendered.sensor.white_level - rendered.sensor.black_level
+            save_png(folder / "texture.png", texture_rgba(result.texture.cpu().numpy(), white))
+        tiles = [int(np.ravel_multi_index((ty, tx), gt.shape)) for ty, tx in
+                 ((gt.shape[0] // 2, gt.shape[1] // 4), (gt.shape[0] * 3 // 4, gt.shape[1] // 2),
+                  (gt.shape[0] // 3, gt.shape[1] * 3 // 4))]
+        corr = pipeline.network_tp.result.corr.cpu().numpy()
+        save_png(folder / "correlations.png", correlation_sheet(corr, tiles))
+        report = {
+            "scene": f"demo-{seed}", "size": [width, height], "device": str(pipeline.device),
+            "seconds": {"render": t_render, "pipeline_setup": t_setup, "frame": t_frame},
+            "stats": stats,
+            "files": sorted(p.name for p in folder.iterdir() if p.suffix == ".png"),
+        }
+        lines = [f"tpnet demo: {width}x{height} quad frame of the built-in scene on {pipeline.device}",
+                 f"render {t_render:.1f} s, pipeline set-up {t_setup:.1f} s, one frame {t_frame:.2f} s "
+                 f"(disparity engine: {result.tile_passes:.1f} tile passes; network + texture)"]
+        for name, per_class in stats.items():
+            parts = [f"{c} rmse {v['rmse_inliers']:.3f} px (median {v['median_abs']:.3f}, gross {v['gross']:.1%}, "
+                     f"{v['tiles']} tiles)" for c, v in per_class.items() if c in ("flat", "edge")]
+            lines.append(f"  {name}: " + "; ".join(parts))
+        lines.append(f"  wrote {', '.join(report['files'])} and report.json to {out}")
+        (folder / "report.json").write_text(json.dumps(report, indent=1))
+        (folder / "report.txt").write_text("\n".join(lines) + "\n")
     report["text"] = "\n".join(lines)
     return report

@@ -20,6 +20,12 @@ NET_LAYERS = 4  # combined layers per tile: hor, vert, diag-main, diag-other
 PAD = 18
 # Centres further than this from the image (pixels) are clamped before rounding (int32 safety only).
 CENTRE_LIMIT = 1.0e6
+# Pixels of larger magnitude count as not finite (their tile invalid, its windows zero-filled): a window's CLT
+# reaches ~64 x its largest pixel, a pair product ~4 x the square of that: 2^50 keeps every product below float32's
+# 3.4e38 with a margin of ~1e4 for aberration-kernel gains (issue 16: >= 1e19 gave NaN correlations).
+PIXEL_LIMIT = 2.0**50
+# Largest finite float32: a number of larger magnitude is NaN or infinite.
+FLOAT32_MAX = 3.4028234e38
 
 # Threads per block of the tile kernels on CUDA, and of every per-thread launch there (one block size per module
 # keeps Warp from compiling a module twice). On the CPU a block is one lane (platform.md §1).

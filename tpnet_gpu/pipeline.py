@@ -171,10 +171,27 @@ class Pipeline:
         return FrameResult(disparity, confidence, result.two_depth, initial, tp.result.valid.view(self.grid), texture, result.search,
                            result.tile_passes)
 
-    def stream(self, frames: Iterable) -> Iterator[FrameResult]:
-        """Process an iterable of frames (e.g. a camera) one by one; each result is valid until the next."""
-        for item in frames:
-            yield self.process(item)
+    def stream(self, frames: Iterable) -> Iterator[FrameResult | FrameError]:
+        """Process an iterable of frames (e.g. a camera) one by one; each result is valid until the next.
+
+        One result per frame, in order: a frame that ``process`` refuses or fails on (a wrong shape, a bad
+        dtype, ...) gives a ``FrameError`` carrying the exception, and the stream goes on with the next frame
+        (whose result is what it would have been without the bad one). Errors of the iterable itself end it."""
+        for index, item in enumerate(frames):
+            try:
+                result = self.process(item)
+            except Exception as exc:  # noqa: BLE001 - one bad frame must not end a camera's stream (issue 16)
+                yield FrameError(index, exc)
+                continue
+            yield result
+
+
+@dataclass(frozen=True)
+class FrameError:
+    """A frame of ``Pipeline.stream`` that gave no result: its place in the stream and the exception raised."""
+
+    index: int
+    error: Exception
 
 
 def load_frames(paths, cfa: str | None = None) -> tuple[np.ndarray, str]:

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import importlib.util
 import os
+from pathlib import Path
 
 import warp as wp
 
@@ -25,3 +29,17 @@ def default_device() -> str:
     """"cuda" when a CUDA device is present, else "cpu"."""
     init_warp()
     return "cuda" if wp.is_cuda_available() else "cpu"
+
+
+@functools.cache
+def kernel_module_options() -> dict:
+    """The module options of every Warp kernel module (``kernels/*.py``): no backward pass, and a digest of all
+    the kernel sources. Warp 1.19's content hash leaves out the functions a kernel only passes to ``tile_map``
+    (measured: changing one left the hash as it was, and a warm cache served the old code - issue 16); the
+    options are hashed, so any edit of a kernel file now gives its modules, and the modules that call into it,
+    a new hash."""
+    digest = hashlib.sha256()
+    folder = importlib.util.find_spec("tpnet_gpu.kernels").submodule_search_locations[0]  # kernels/ in the repo
+    for path in sorted(Path(folder).glob("*.py")):
+        digest.update(path.name.encode() + path.read_bytes())
+    return {"enable_backward": False, "kernel_sources": digest.hexdigest()[:16]}

@@ -230,7 +230,8 @@ class DisparityEngine:
         (a device scalar: no host round trip), written into ``out`` (default: the processor's staging buffer,
         so a frame costs no new frame-sized array and ``load`` reads it in place) and returned (valid until
         ``out`` is written again); ``self.scale`` keeps the factor (1 for all-zero frames)."""
-        frames_t = validate.frames(frames, self.tp.geometry)  # before the copy: it would broadcast a bad shape
+        frames_t = validate.frames(frames, self.tp.geometry)  # before the copy: it would broadcast a bad shape or
+        # cast a complex frame to real
         out = self.tp.staging if out is None else out
         out.copy_(frames_t)  # converts dtype and device
         level = torch.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0).abs().mean()

@@ -32,8 +32,9 @@ class TileResult:
         corr: ``(tiles, pairs, 15, 15)`` pair correlations, row = vertical lag + 7; zero where not computed.
         layers: ``(tiles, 4, 9, 9)`` network layers [hor, vert, diag-main, diag-other], or None unless the
             pairs are the quad's 6.
-        valid: ``(tiles,)`` bool: active, every centre and window pixel finite, and every window wholly inside
-            the image. Tiles with windows partly off the image still get values computed from pair-clamped
+        valid: ``(tiles,)`` bool: active, every centre and window pixel finite (pixels also at most
+            ``layout.PIXEL_LIMIT`` = 2^50 in magnitude), every window wholly inside the image and none of them
+            featureless (all its pixels equal: tile_processor.md §1.4, §6.7). Tiles with windows partly off the image still get values computed from pair-clamped
             pixels; tiles with non-finite input or inactive tiles get zero correlations.
         centres: ``(tiles, cams, 2)`` the per-camera tile centres (x, y) used, pixels.
         texture: ``(4, H, W)`` R, G, B, alpha (mono: ``(2, H, W)`` Y, alpha) overlap-added textures of the

@@ -11,13 +11,21 @@ Fused or split: ``measure`` runs the fused pass - one launch that converts and c
 task list of them) without writing the frequency-domain (CLT) tiles - unless the processor was built with
 ``clt=True``: then it runs the split stages (convert, then correlate) and ``result.clt`` holds the tiles. The
 whole-frame CLT buffer (~1 GB at 2592x1936 quad) exists only with ``clt=True``; a texturing processor without it
-converts the tiles for the texture band by band (16 tile rows) into a band-sized buffer (Buffers), so its
+converts the tiles for the texture band by band (``TEXTURE_BAND_ROWS`` tile rows) into a band-sized buffer, so its
 ``measure`` and ``process`` correlate fused. With ``clt=True``, ``texture`` converts the tiles first when the last
 targets have not been converted. Both paths give the same correlations, layers and masks (tests compare each
 to the float64 reference); without the buffer ``result.clt`` is None.
+
+Threads: a processor belongs to the thread that first gives it work (``load``, ``set_targets`` or a stage); a
+call from any other thread while that one is alive raises ``RuntimeError`` - its results are views that another
+thread's call would overwrite under it (issue 16: two threads got each other's results). A caller may keep the
+views until its own next call on the processor; to keep them longer, or to hand them to another thread, clone
+them. Build one processor per thread (launches of several processors are serialised by the backends).
 """
 
 from __future__ import annotations
+
+import threading
 
 import torch
 import warp as wp
@@ -101,6 +109,8 @@ class TileProcessor:
         self._masked = False  # the last targets came with an active mask
         self._ideal = True  # the last targets were disparities (centres computed on the device)
         self._frame_count = 0
+        self._owner: threading.Thread | None = None  # the thread whose calls the result views belong to
+        self._owner_lock = threading.Lock()  # two first calls at once: one of them becomes the owner
         if self.device.is_cuda:  # the zero-fills above must finish before a user's side stream writes inputs
             wp.synchronize_device(self.device)
 
@@ -143,6 +153,7 @@ class TileProcessor:
                 device or numpy array, any real dtype. A float32 contiguous tensor on the processor's device is
                 read in place (without graphs); anything else is copied into the processor's staging buffer.
         """
+        self._claim("load")
         frames = validate.frames(frames, self.geometry)
         b = self._buffers
         in_place = (not self.graph and frames.dtype == torch.float32 and frames.device == b.torch_device
@@ -155,6 +166,7 @@ class TileProcessor:
 
     def set_targets(self, target_disparity=None, *, centres=None, active=None) -> None:
         """Copy one pass's targets into the processor's buffers (see ``measure`` for the arguments)."""
+        self._claim("set_targets")
         validate.targets(target_disparity, centres)
         geo, b = self.geometry, self._buffers
         mask = validate.active(active, geo)
@@ -209,7 +221,22 @@ class TileProcessor:
         """The texture from the converted whole-frame CLT tiles, or converted band by band into the band buffer."""
         return "texture" if self.keeps_clt else "convert_texture"
 
+    def _claim(self, call: str) -> None:
+        """Make the calling thread the owner, or refuse while another living thread owns the processor."""
+        me = threading.current_thread()
+        if self._owner is me:
+            return
+        with self._owner_lock:
+            owner = self._owner
+            if owner is not None and owner is not me and owner.is_alive():
+                raise RuntimeError(
+                    f"{call}: this TileProcessor belongs to thread {owner.name!r} (its results are views of the "
+                    f"processor's buffers that a call from thread {me.name!r} would overwrite); build one "
+                    "processor per thread")
+            self._owner = me
+
     def _run(self, steps: tuple[str, ...]) -> None:
+        self._claim("/".join(steps))
         if self._ideal and any(step in steps for step in ("convert", "fused", "convert_texture")):
             steps = ("centres", *steps)
         self._backend.run(steps, frames=None, masked=self._masked)

@@ -90,10 +90,14 @@ def kernels(value, geo: Geometry) -> np.ndarray | None:
     if value is None:
         return None
     k = value.detach().cpu().numpy() if isinstance(value, torch.Tensor) else np.asarray(value)
-    expected = f"(cams={geo.cams}, [rows, cols,] colours={geo.colours}, 4, 8, 8)"
+    if not (np.issubdtype(k.dtype, np.floating) or np.issubdtype(k.dtype, np.integer)):
+        raise TypeError(f"kernels: expected real values (float or integer), got {k.dtype}")
+    expected = f"(cams={geo.cams}, [rows >= 1, cols >= 1,] colours={geo.colours}, 4, 8, 8)"
     if k.ndim == 5:
         k = k[:, None, None]
-    if k.ndim != 7 or k.shape[0] != geo.cams or k.shape[3:] != (geo.colours, 4, DTT_SIZE, DTT_SIZE):
+    # an empty kernel grid would leave the kernels' lookup nothing to read (issue 16: a crash in process)
+    if (k.ndim != 7 or k.shape[0] != geo.cams or min(k.shape[1:3]) < 1
+            or k.shape[3:] != (geo.colours, 4, DTT_SIZE, DTT_SIZE)):
         raise ValueError(f"kernels: expected shape {expected}, got {tuple(k.shape)}")
     if not np.all(np.isfinite(k)):
         raise ValueError("kernels: expected finite values, got NaN or infinity")
@@ -103,6 +107,8 @@ def kernels(value, geo: Geometry) -> np.ndarray | None:
 def _tensor(name: str, value, shape: tuple, axes: str, kinds: str) -> torch.Tensor:
     """``value`` as a torch tensor of ``shape`` (NumPy arrays are wrapped, not copied)."""
     if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "biufc":  # torch.from_numpy's own message would not name the argument
+            raise TypeError(f"{name}: expected numbers, got a numpy array of {value.dtype}")
         value = torch.from_numpy(value)
     if not isinstance(value, torch.Tensor):
         raise TypeError(f"{name}: expected {kinds}, got {type(value).__name__}")
@@ -142,14 +148,17 @@ def centres(value, geo: Geometry) -> torch.Tensor:
 
 
 def active(value, geo: Geometry) -> torch.Tensor | None:
-    """None (every tile) or a bool mask of ``tiles`` elements, returned flat."""
+    """None (every tile) or a bool mask of shape ``(tiles_y, tiles_x)`` or ``(tiles,)``, returned flat. Any
+    other shape of the same size (a transposed grid) is refused: it would select the wrong tiles."""
     if value is None:
         return None
     if isinstance(value, np.ndarray):
         value = torch.from_numpy(value)
-    if not isinstance(value, torch.Tensor) or value.dtype != torch.bool or value.numel() != geo.tiles:
+    shapes = ((geo.tiles_y, geo.tiles_x), (geo.tiles,))
+    if not isinstance(value, torch.Tensor) or value.dtype != torch.bool or tuple(value.shape) not in shapes:
         got = f"{value.dtype} of shape {tuple(value.shape)}" if isinstance(value, torch.Tensor) else type(value)
-        raise ValueError(f"active: expected a bool mask of {geo.tiles} tiles (tiles_y, tiles_x), got {got}")
+        raise ValueError(f"active: expected a bool mask of shape {shapes[0]} (tiles_y, tiles_x) or {shapes[1]}, "
+                         f"got {got}")
     return value.reshape(-1)
 
 

@@ -1,0 +1,66 @@
+"""Output folders of the command line, written whole or not at all (issue 16: outputs clobbered or half-written).
+
+``output_folder(out, overwrite=..., inputs=...)`` checks the folder before any work (a non-empty one is refused
+without ``overwrite``; one that holds, or is, an input is always refused), yields a fresh temporary folder beside
+it to write into, and only when the block ends without an exception puts it in place: the old folder is renamed
+aside, the new one renamed to ``out``, the old folder's files that the new output does not replace are moved
+into it, and the old folder is removed. A failure or a kill while writing leaves the old output as it was (a kill
+also leaves a ``.NAME.tmp-*`` folder beside it); a kill between the two renames leaves the old output whole in
+``.NAME.old-*/folder``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def check(out, *, overwrite: bool, inputs: Iterable = (), option: str = "--out") -> Path:
+    """``out`` resolved, or a ``ValueError`` naming ``option`` when it may not be written (module docstring)."""
+    out = Path(out).resolve()
+    for source in inputs:
+        source = Path(source).resolve()
+        if _inside(source, out) or _inside(out, source):
+            raise ValueError(f"{option}: expected a folder apart from the inputs, got {out} (input {source})")
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{option}: expected a folder, got the file {out}")
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise ValueError(f"{option}: expected an empty or new folder (or --overwrite), got {out}, which holds files")
+    return out
+
+
+@contextlib.contextmanager
+def output_folder(out, *, overwrite: bool, inputs: Iterable = (), option: str = "--out") -> Iterator[Path]:
+    """Check ``out`` (``check``), yield a temporary folder to write into, and put it in place as ``out`` when the
+    block ends without an exception (else remove it and leave ``out`` as it was)."""
+    out = check(out, overwrite=overwrite, inputs=inputs, option=option)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+    try:
+        yield staging
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    _put_in_place(staging, out)
+
+
+def _put_in_place(staging: Path, out: Path) -> None:
+    if not out.exists():
+        os.replace(staging, out)
+        return
+    old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
+    os.replace(out, old / "folder")
+    os.replace(staging, out)
+    kept = old / "folder"
+    for entry in kept.iterdir():  # the old files this output does not replace stay
+        if not (out / entry.name).exists():
+            os.replace(entry, out / entry.name)
+    shutil.rmtree(old, ignore_errors=True)
