@@ -120,6 +120,7 @@ class Pipeline:
                 config=net_config, textures=config.textures, texture_config=TextureConfig(), device=str(tp.device),
                 backend=backend)
             self.model = infer.load(self.weights, device=self.device)
+            self._infer = infer.infer  # an attribute, so the pipeline bench can time the network's share
 
     def _weights(self, weights, colours: int) -> Path | None:
         """The weights for this rig's layer lags and these frames' colours: ``weights`` if they were trained for
@@ -159,7 +160,7 @@ class Pipeline:
             target = torch.where(measured, initial, result.search)
             for _ in range(cfg.network_passes):
                 layers = self.layers.of(self.engine.measure_at(tp, target))
-                target = infer.infer(self.model, layers, target, grid=self.grid)
+                target = self._infer(self.model, layers, target, grid=self.grid)
             disparity = torch.where(measured, target, torch.full_like(target, float("nan")))
         texture = None
         if cfg.textures:  # shift-corrected at the final disparity
@@ -168,8 +169,8 @@ class Pipeline:
             texture = tp.result.texture
             texture[:-1] /= self.engine.scale  # colours back in the frames' units (alpha is unitless)
         confidence = torch.where(measured, result.confidence, torch.zeros_like(result.confidence))
-        return FrameResult(disparity, confidence, result.two_depth, initial, tp.result.valid.view(self.grid), texture, result.search,
-                           result.tile_passes)
+        return FrameResult(disparity, confidence, result.two_depth, initial, tp.result.valid.view(self.grid), texture,
+                           result.search, result.tile_passes)
 
     def stream(self, frames: Iterable) -> Iterator[FrameResult | FrameError]:
         """Process an iterable of frames (e.g. a camera) one by one; each result is valid until the next.
