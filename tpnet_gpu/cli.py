@@ -185,7 +185,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 BACKEND_HELP = (f"tile-processor kernels (default: warp for frames of at most {SMALL_FRAME_PIXELS} pixels, whose "
                 "start-up dominates; else taichi on the CPU, warp on CUDA)")
 OVERWRITE_HELP = "replace the files of a non-empty output folder (default: refuse it)"
-BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup")
+BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:

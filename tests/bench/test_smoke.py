@@ -187,6 +187,17 @@ def test_bench_network_limits(tmp_path, capsys):
     assert report["table"][0] in out and "[bench_network_limits]" in err
 
 
+def test_bench_fuzz(tmp_path, capsys):
+    # A short campaign in its child process: its counts add up (each case has at least 4 tile tasks) and the
+    # oracles hold (the same ones as tests/fuzz).
+    from tpnet_gpu.bench import bench_fuzz
+
+    report, out, err = run_bench(bench_fuzz, ["--examples", "12"], tmp_path, capsys)
+    assert report["crashed"] is False and report["cases"] == 12
+    assert report["tile_tasks_per_backend"] >= 4 * 12 and report["failures"] == {}
+    assert report["table"][0] in out
+
+
 def test_every_bench_module_is_a_cli_choice():
     names = {m.name.removeprefix("bench_") for m in pkgutil.iter_modules(tpnet_gpu.bench.__path__)
              if m.name.startswith("bench_")}

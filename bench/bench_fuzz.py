@@ -1,0 +1,109 @@
+"""The issue-16 fuzz campaign: many drawn ``TileProcessor`` cases on both backends, counted.
+
+    tpnet bench fuzz [--examples 3000] [--seed 0] [--debug] [--json ...]
+    python -m tpnet_gpu.bench.bench_fuzz [same options]
+
+Draws the cases of ``bench/fuzz_cases.py`` (the CI slice's, plus larger frames, so the count of tile tasks grows)
+and checks each against the same oracles: nothing raises, ``valid`` as documented, correlations finite and zero
+where the tile cannot be finite, Warp = Taichi on well-conditioned tiles. The campaign runs in a child process,
+so a crash (a signal) is reported with the count reached, not lost. ``--debug`` runs the child with Taichi's debug
+mode (``TPNET_TAICHI_DEBUG=1``: bounds checks on every array access), so an out-of-bounds access fails the case
+instead of reading memory silently. Prints the counts (cases, tile tasks per
+backend, valid tiles, failures by oracle) and saves JSON. Needs hypothesis (the ``test`` extra).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from pathlib import Path
+
+from tpnet_gpu.bench import common
+
+CAMPAIGN_SIZES = [(16, 16), (16, 24), (24, 16), (32, 48), (40, 40), (64, 96), (96, 128)]
+PROGRESS_EVERY = 100  # cases between progress records (what a crash report can tell)
+
+
+def _worker(examples: int, seed: int, progress: Path) -> None:
+    """Run the campaign in this process, writing the counts to ``progress`` every ``PROGRESS_EVERY`` cases."""
+    from hypothesis import HealthCheck, Phase, given, settings  # noqa: PLC0415 - the test extra
+    from hypothesis import seed as hypothesis_seed  # noqa: PLC0415
+
+    from tpnet_gpu.bench.fuzz_cases import cases, check  # noqa: PLC0415
+
+    counts = {"cases": 0, "tile_tasks_per_backend": 0, "valid_tiles": 0, "failures": Counter(), "examples": []}
+
+    def record(done: bool) -> None:
+        progress.write_text(json.dumps({**counts, "failures": dict(counts["failures"]), "done": done}))
+
+    @hypothesis_seed(seed)
+    @settings(max_examples=examples, deadline=None, database=None, phases=[Phase.generate],
+              suppress_health_check=list(HealthCheck))
+    @given(cases(CAMPAIGN_SIZES))
+    def campaign(case):
+        outcome = check(case)
+        counts["cases"] += 1
+        counts["tile_tasks_per_backend"] += outcome["tiles"]
+        counts["valid_tiles"] += outcome["valid"]
+        counts["failures"].update(outcome["failures"])
+        if outcome["failures"] and len(counts["examples"]) < 10:
+            counts["examples"].append({"size": [case["height"], case["width"]], "cfa": case["cfa"],
+                                       "magnitude": case["magnitude"], "failures": outcome["failures"]})
+        if counts["cases"] % PROGRESS_EVERY == 0:
+            record(False)
+
+    campaign()
+    record(True)
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(prog=common.prog(__name__), description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--examples", type=int, default=3000, help="drawn cases (each on both backends)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--debug", action="store_true", help="Taichi's debug mode (bounds checks)")
+    parser.add_argument("--json", default="bench_fuzz.json", help="output JSON path ('' to skip)")
+    parser.add_argument("--worker", default=None, help=argparse.SUPPRESS)  # the child's progress file
+    args = parser.parse_args(argv)
+    if args.examples < 1:
+        parser.error(f"--examples: expected an int >= 1, got {args.examples}")
+    if args.worker:
+        _worker(args.examples, args.seed, Path(args.worker))
+        return {}
+    with tempfile.TemporaryDirectory() as tmp:
+        progress = Path(tmp) / "progress.json"
+        start = time.perf_counter()
+        command = [sys.executable, "-m", "tpnet_gpu.bench.bench_fuzz", "--examples", str(args.examples),
+                   "--seed", str(args.seed), "--worker", str(progress)]
+        env = {**os.environ, **({"TPNET_TAICHI_DEBUG": "1"} if args.debug else {})}
+        child = subprocess.run(command, capture_output=True, text=True, env=env)
+        seconds = time.perf_counter() - start
+        counts = json.loads(progress.read_text()) if progress.exists() else {"cases": 0, "done": False}
+    crashed = child.returncode != 0 or not counts.get("done")
+    report = {"examples": args.examples, "seed": args.seed, "debug": args.debug, "seconds": seconds,
+              "returncode": child.returncode,
+              "crashed": crashed, "stderr_tail": child.stderr[-2000:] if crashed else "", **counts,
+              "machine": common.machine_info()}
+    failures = report.get("failures", {})
+    rows = [["cases", report.get("cases", 0)], ["tile tasks per backend", report.get("tile_tasks_per_backend", 0)],
+            ["valid tiles (Warp)", report.get("valid_tiles", 0)],
+            ["crash", f"yes (exit {child.returncode}) after >= {report.get('cases', 0)} cases" if crashed else "no"],
+            *[[f"failed: {name}", n] for name, n in sorted(failures.items())],
+            ["failures in all", sum(failures.values())], ["seconds", f"{seconds:.0f}"]]
+    title = "fuzz campaign (both backends, CPU" + (", Taichi debug mode)" if args.debug else ")")
+    table = common.format_table([title, "count"], [[str(c) for c in r] for r in rows])
+    report["table"] = table
+    print("\n".join(table))
+    if args.json:
+        common.save_json(report, args.json)
+    return report
+
+
+if __name__ == "__main__":
+    sys.exit(common.run(main))
