@@ -1,6 +1,6 @@
 """The issue-16 fuzz campaign: many drawn ``TileProcessor`` cases on both backends, counted.
 
-    tpnet bench fuzz [--examples 3000] [--seed 0] [--debug] [--json ...]
+    tpnet bench fuzz [--examples 3000] [--seed 0] [--debug] [--soak 1000] [--json ...]
     python -m tpnet_gpu.bench.bench_fuzz [same options]
 
 Draws the cases of ``bench/fuzz_cases.py`` (the CI slice's, plus larger frames, so the count of tile tasks grows)
@@ -10,6 +10,11 @@ so a crash (a signal) is reported with the count reached, not lost. ``--debug`` 
 mode (``TPNET_TAICHI_DEBUG=1``: bounds checks on every array access), so an out-of-bounds access fails the case
 instead of reading memory silently. Prints the counts (cases, tile tasks per
 backend, valid tiles, failures by oracle) and saves JSON. Needs hypothesis (the ``test`` extra).
+
+``--soak N`` also streams N frames of 64x48 through ``Pipeline.stream`` (shipped weights, Taichi), three good
+frames in turn and a bad one (wrong shape, not an array, complex) every ``BAD_EVERY``: every bad frame must give
+a ``FrameError``, every good one the same result bit for bit as that frame's first (nothing leaks between frames),
+and the process RSS, sampled every ``BAD_EVERY`` frames, must stay flat.
 """
 
 from __future__ import annotations
@@ -28,6 +33,49 @@ from tpnet_gpu.bench import common
 
 CAMPAIGN_SIZES = [(16, 16), (16, 24), (24, 16), (32, 48), (40, 40), (64, 96), (96, 128)]
 PROGRESS_EVERY = 100  # cases between progress records (what a crash report can tell)
+BAD_EVERY = 50  # soak: one bad frame in this many
+
+
+def _rss_mib() -> float:
+    """The process's resident set now (Linux /proc; NaN elsewhere)."""
+    try:
+        pages = int(Path("/proc/self/statm").read_text().split()[1])
+    except (OSError, IndexError, ValueError):
+        return float("nan")
+    return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def soak(frames_count: int, seed: int) -> dict:
+    """Stream ``frames_count`` frames with a bad one every ``BAD_EVERY`` (module docstring); the counts."""
+    import numpy as np  # noqa: PLC0415
+    import torch  # noqa: PLC0415
+
+    from tpnet_gpu.pipeline import FrameError, Pipeline  # noqa: PLC0415
+
+    height, width = 48, 64
+    rng = np.random.default_rng(seed)
+    good = [rng.uniform(0, 3000, (4, height, width)).astype(np.float32) for _ in range(3)]
+    bad = [good[0][:3], "not a frame", np.zeros((4, height, width), np.complex64)]
+    plan = [("bad", bad[(i // BAD_EVERY) % 3]) if i % BAD_EVERY == BAD_EVERY - 1 else ("good", i % 3)
+            for i in range(frames_count)]
+    pipe = Pipeline(height, width, device="cpu", max_disparity=6.0, backend="taichi")
+    first, counts, rss = {}, Counter(), []
+    for i, result in enumerate(pipe.stream(frame if kind == "bad" else good[frame] for kind, frame in plan)):
+        kind, frame = plan[i]
+        if kind == "bad":
+            counts["bad frames given a FrameError" if isinstance(result, FrameError) else "bad frames NOT refused"] += 1
+        elif isinstance(result, FrameError):
+            counts["good frames refused"] += 1
+        else:
+            got = (result.disparity.clone(), result.texture.clone())
+            want = first.setdefault(frame, got)
+            same = all(torch.equal(torch.nan_to_num(a, nan=-1.0), torch.nan_to_num(b, nan=-1.0))
+                       for a, b in zip(got, want))
+            counts["good frames equal to their first" if same else "good frames DIFFERENT"] += 1
+        if i % BAD_EVERY == 0:
+            rss.append(round(_rss_mib(), 1))
+    return {"frames": frames_count, **counts, "rss_mib_every_50": rss,
+            "rss_growth_mib": rss[-1] - rss[min(2, len(rss) - 1)] if rss else 0.0}
 
 
 def _worker(examples: int, seed: int, progress: Path) -> None:
@@ -68,11 +116,14 @@ def main(argv=None) -> dict:
     parser.add_argument("--examples", type=int, default=3000, help="drawn cases (each on both backends)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--debug", action="store_true", help="Taichi's debug mode (bounds checks)")
+    parser.add_argument("--soak", type=int, default=0, help="also stream this many frames with bad ones (0: no)")
     parser.add_argument("--json", default="bench_fuzz.json", help="output JSON path ('' to skip)")
     parser.add_argument("--worker", default=None, help=argparse.SUPPRESS)  # the child's progress file
     args = parser.parse_args(argv)
     if args.examples < 1:
         parser.error(f"--examples: expected an int >= 1, got {args.examples}")
+    if args.soak < 0:
+        parser.error(f"--soak: expected an int >= 0, got {args.soak}")
     if args.worker:
         _worker(args.examples, args.seed, Path(args.worker))
         return {}
@@ -97,6 +148,9 @@ def main(argv=None) -> dict:
             *[[f"failed: {name}", n] for name, n in sorted(failures.items())],
             ["failures in all", sum(failures.values())], ["seconds", f"{seconds:.0f}"]]
     title = "fuzz campaign (both backends, CPU" + (", Taichi debug mode)" if args.debug else ")")
+    if args.soak:
+        report["soak"] = soak(args.soak, args.seed)
+        rows += [[f"soak: {k}", v] for k, v in report["soak"].items() if k != "rss_mib_every_50"]
     table = common.format_table([title, "count"], [[str(c) for c in r] for r in rows])
     report["table"] = table
     print("\n".join(table))

@@ -192,9 +192,11 @@ def test_bench_fuzz(tmp_path, capsys):
     # oracles hold (the same ones as tests/fuzz).
     from tpnet_gpu.bench import bench_fuzz
 
-    report, out, err = run_bench(bench_fuzz, ["--examples", "12"], tmp_path, capsys)
+    report, out, err = run_bench(bench_fuzz, ["--examples", "12", "--soak", "101"], tmp_path, capsys)
     assert report["crashed"] is False and report["cases"] == 12
     assert report["tile_tasks_per_backend"] >= 4 * 12 and report["failures"] == {}
+    soak = report["soak"]  # frames 49 and 99 are bad, the other 99 good (3 distinct frames, each equal to its first)
+    assert soak["bad frames given a FrameError"] == 2 and soak["good frames equal to their first"] == 99
     assert report["table"][0] in out
 
 
