@@ -118,3 +118,25 @@ def test_two_depth_tiles_are_the_rendered_depth_edges():
     assert flags.sum() >= 10 and precision >= 0.4
     assert gross[flags].mean() >= 1.5 * gross[measured & ~flags].mean()
     assert torch.allclose(result.confidence[result.two_depth], 0.25 * result.strength[result.two_depth])
+
+
+def test_frame_scale_does_not_depend_on_torch_threads():
+    """The frames' scale (their mean |value| to REFERENCE_LEVEL) is the same with 1 and 2 torch threads, and the
+    float64 mean's: a float32 mean depends on the reduction's split, and its 1-ulp changes of the scale changed
+    layer values of a data set built with other threads. Checked to fail with a float32 mean on these frames."""
+    from tpnet_gpu.disparity.engine import REFERENCE_LEVEL  # noqa: PLC0415
+
+    height, width = 480, 640
+    frames = np.random.default_rng(0).uniform(0, 4000, (4, height, width)).astype(np.float32)  # float32 means differ
+    engine = DisparityEngine(height, width, device="cpu")
+    before = torch.get_num_threads()
+    scales = []
+    try:
+        for threads in (1, 2):
+            torch.set_num_threads(threads)
+            engine.normalise(frames)
+            scales.append(float(engine.scale))
+    finally:
+        torch.set_num_threads(before)
+    assert scales[0] == scales[1]
+    assert scales[0] == pytest.approx(REFERENCE_LEVEL / np.abs(frames, dtype=np.float64).mean(), rel=2.4e-7)  # 2 ulp

@@ -234,7 +234,11 @@ class DisparityEngine:
         # cast a complex frame to real
         out = self.tp.staging if out is None else out
         out.copy_(frames_t)  # converts dtype and device
-        level = torch.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0).abs().mean()
+        # per-row float32 sums, then their float64 total: a whole-frame float32 mean depends on the torch thread
+        # count (1 ulp of the scale flipped layer values of a data set built with other threads), and a float64
+        # mean costs a frame-sized float64 copy
+        magnitude = torch.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0).abs_()
+        level = (magnitude.sum(dim=-1).double().sum() / magnitude.numel()).float()
         self.scale = torch.where(level > 0, REFERENCE_LEVEL / level, torch.ones_like(level))
         return out.mul_(self.scale)
 
