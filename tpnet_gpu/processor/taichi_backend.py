@@ -17,6 +17,7 @@ from tpnet_gpu import tables, taichi_setup
 from tpnet_gpu.config import CorrelationConfig, TextureConfig
 from tpnet_gpu.kernels import taichi_convert, taichi_correlate, taichi_frames, taichi_fused, taichi_texture
 from tpnet_gpu.layout import CPU_FUSED_SLOTS_PER_THREAD, CUDA_FUSED_SLOTS, NET_LAYERS, NET_SIDE
+from tpnet_gpu.processor.backend import run_bands
 from tpnet_gpu.processor.buffers import Buffers
 from tpnet_gpu.processor.validate import Geometry
 
@@ -105,22 +106,19 @@ class TaichiBackend:
         self._texture(convert=True, masked=masked)
 
     def _texture(self, convert: bool = False, masked: bool = False) -> None:
-        """The Warp backend's band order (WarpBackend._texture): with ``convert``, each band converted first."""
+        """The texture band by band in ``backend.run_bands``' order; with ``convert``, each band converted first."""
         b, geo, tc, v = self.b, self.geo, self.texture_config, self._v
-        bands = b.texture_bands
 
         def convert_band(band) -> None:
             self._convert_tiles(band.centres, band.active if masked else band.all_active, band.clt, band.finite,
                                 band.valid)
 
-        if convert:
-            convert_band(bands[0])
-        for i, band in enumerate(bands):
+        def read_tiles(band) -> None:
             taichi_texture.texture_imclt(v(band.clt), v(band.finite), geo.cams, geo.colours, v(b.tex_lpf),
                                          v(b.inv_cos), v(b.inv_sin), v(b.inv_window2), tc.scale_shot,
                                          tc.min_shot, v(band.pix), v(band.cmp))
-            if convert and i + 1 < len(bands):  # the alpha fade reads the next band's finite (Warp backend)
-                convert_band(bands[i + 1])
+
+        def write_pixels(band) -> None:
             taichi_texture.texture_combine(
                 v(band.pix), v(band.cmp), v(b.finite), band.first * geo.tiles_x, geo.tiles_x, geo.tiles_y,
                 b.ring_rows, geo.cams, geo.colours, v(b.offsets), v(b.tex_weights_c), v(b.channel_of_colour),
@@ -129,3 +127,5 @@ class TaichiBackend:
             )
             taichi_texture.overlap_add(v(b.tex_rgba), v(b.finite), geo.tiles_x, geo.tiles_y, b.ring_rows, band.y0,
                                        band.rows, v(b.canvas))
+
+        run_bands(b.texture_bands, read_tiles, write_pixels, convert_band if convert else None)

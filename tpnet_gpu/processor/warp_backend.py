@@ -22,6 +22,7 @@ from tpnet_gpu import tables
 from tpnet_gpu.config import CorrelationConfig, TextureConfig
 from tpnet_gpu.kernels import convert, correlate, frames, fused, texture
 from tpnet_gpu.layout import CPU_BLOCK_DIM, CUDA_BLOCK_DIM, CUDA_FUSED_SLOTS
+from tpnet_gpu.processor.backend import run_bands
 from tpnet_gpu.processor.buffers import Buffers
 from tpnet_gpu.processor.validate import Geometry
 
@@ -161,18 +162,16 @@ class WarpBackend:
         self._texture(convert=True, masked=masked)
 
     def _texture(self, convert: bool = False, masked: bool = False) -> None:
-        """The texture one band of tile rows at a time through the scratch (Buffers); with ``convert``, each
-        band's CLT tiles are converted into the band buffer first (a processor without the whole-frame one)."""
+        """The texture one band of tile rows at a time through the scratch (Buffers), in ``backend.run_bands``'
+        order; with ``convert``, each band's CLT tiles are converted into the band buffer first (a processor
+        without the whole-frame one)."""
         b, geo, tc = self.b, self.geo, self.texture_config
-        bands = b.texture_bands
 
         def convert_band(band) -> None:
             self._convert_tiles(band.centres, band.active if masked else band.all_active, band.clt, band.finite,
                                 band.valid)
 
-        if convert:
-            convert_band(bands[0])
-        for i, band in enumerate(bands):
+        def read_tiles(band) -> None:
             self._tile_launch_n(
                 texture.texture_imclt, band.finite.shape[0],
                 [band.clt, band.finite, geo.cams, geo.colours, b.tex_lpf, b.inv_cos, b.inv_sin, b.inv_cos_t,
@@ -183,8 +182,8 @@ class WarpBackend:
                                 [band.pix, band.finite, geo.cams, geo.colours, tc.scale_shot, tc.min_shot,
                                  b.inv_window2],
                                 [band.cmp])
-            if convert and i + 1 < len(bands):  # the alpha fade reads the next band's finite; its CLT tiles
-                convert_band(bands[i + 1])  # replace this band's, already read
+
+        def write_pixels(band) -> None:
             self._thread_launch(
                 texture.texture_combine, (band.finite.shape[0], *b.tex_pix.shape[1:]),
                 [band.pix, band.cmp, b.finite, band.first * geo.tiles_x, geo.tiles_x, geo.tiles_y, b.ring_rows,
@@ -194,3 +193,5 @@ class WarpBackend:
             )
             self._thread_launch(texture.overlap_add, (b.canvas.shape[0], band.rows, b.canvas.shape[2]),
                                 [b.tex_rgba, b.finite, geo.tiles_x, geo.tiles_y, b.ring_rows, band.y0], [b.canvas])
+
+        run_bands(b.texture_bands, read_tiles, write_pixels, convert_band if convert else None)
