@@ -21,9 +21,7 @@ from torch import Tensor
 
 from tpnet_gpu import tables
 from tpnet_gpu.disparity.pairs import LAG_TOLERANCE, DirectionGroup, default_pairs, direction_groups
-
-CORR_SIDE = 2 * tables.CORR_RADIUS + 1  # 15
-NET_SIDE = 2 * tables.NET_RADIUS + 1  # 9
+from tpnet_gpu.layout import CORR_SIDE, NET_CROP, NET_SIDE
 
 
 def rig_lags(offsets, pairs=None) -> tuple:
@@ -44,7 +42,7 @@ def lags_match(first, second) -> bool:
 def _gather_index(groups: tuple[DirectionGroup, ...], members: int) -> np.ndarray:
     """``(G, members, 81)`` flat indices into a tile's ``(P, 15, 15)`` correlations: the centre 9x9 of each
     member pair, point-mirrored for mirrored members; 0 in unused member slots."""
-    crop = np.arange(NET_SIDE) + (CORR_SIDE - NET_SIDE) // 2
+    crop = np.arange(NET_SIDE) + NET_CROP
     index = np.zeros((len(groups), members, NET_SIDE * NET_SIDE), dtype=np.int64)
     for g, group in enumerate(groups):
         for m, (pair, mirrored) in enumerate(group.members):
