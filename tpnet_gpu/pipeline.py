@@ -132,13 +132,12 @@ class Pipeline:
                                  f"{[list(v) for v in infer.lags(weights)]}; this pipeline's rig has {lags} "
                                  f"(train weights for it: `tpnet dataset --rig` then `tpnet train`)")
             trained = infer.correlation(weights).colour_weights
-            if trained is not None and len(trained) != colours:
+            if not _fits_colours(weights, colours):
                 raise ValueError(f"weights: {weights} were trained on frames of {len(trained)} colours; these "
                                  f"frames have {colours} (cfa None: mono)")
             return Path(weights)
         found = infer.shipped_for(self.layers.lags)
-        trained = None if found is None else infer.correlation(found).colour_weights
-        if found is None or (trained is not None and len(trained) != colours):
+        if found is None or not _fits_colours(found, colours):
             log.warning("no shipped TPNET weights for this rig (layer lags %s) and %d-colour frames: the disparity "
                         "is the engine's", lags, colours)
             return None
@@ -185,6 +184,13 @@ class Pipeline:
                 yield FrameError(index, exc)
                 continue
             yield result
+
+
+def _fits_colours(weights, colours: int) -> bool:
+    """Whether the weights were trained on frames of ``colours`` colours (weights from before the colour record
+    fit any)."""
+    trained = infer.correlation(weights).colour_weights
+    return trained is None or len(trained) == colours
 
 
 @dataclass(frozen=True)
