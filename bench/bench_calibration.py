@@ -84,7 +84,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--width", type=int, default=320)
     parser.add_argument("--height", type=int, default=240)
     parser.add_argument("--rounds", type=int, default=4, help="measure + fit rounds of each method")
-    parser.add_argument("--gradient-steps", type=int, default=20, help="L-BFGS iterations per gradient round")
+    parser.add_argument("--gradient-steps", type=int, default=10, help="L-BFGS iterations per gradient round")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--json", default="out/bench_calibration.json")
     args = parser.parse_args(argv)

@@ -21,12 +21,14 @@ METHODS = ("lma", "gradient")
 @dataclass(frozen=True)
 class CalibrationConfig:
     """``rounds``: most measure + fit rounds; ``tolerance``: stop when a round moves the frame edge by less (px);
-    ``lma``: the robust fit's settings; ``gradient_steps``: L-BFGS iterations per round of the gradient method."""
+    ``lma``: the robust fit's settings; ``gradient_steps``: L-BFGS iterations per round of the gradient method,
+    on at most ``gradient_tiles`` tiles per frame (the strongest: each iteration re-correlates them all)."""
 
     rounds: int = 4
     tolerance: float = 0.02
     lma: LmaSettings = LmaSettings()
-    gradient_steps: int = 20
+    gradient_steps: int = 10
+    gradient_tiles: int = 300
 
 
 @dataclass(frozen=True)
@@ -79,7 +81,8 @@ def calibrate(scenes, rig: Rig, *, method: str = "lma", config: CalibrationConfi
         else:
             from tpnet_gpu.calibration.gradient import fit as gradient_fit  # noqa: PLC0415 - torch autograd path
 
-            e_new, summary = gradient_fit(frames, current, config.gradient_steps, device=device, backend=backend)
+            e_new, summary = gradient_fit(frames, current, config.gradient_steps, config.gradient_tiles, device=device,
+                                         backend=backend)
         moved = model.edge_misalignment(rig, e_new, e)
         e = e_new
         rounds.append({**summary, "moved_px": moved})
