@@ -80,7 +80,7 @@ def fit(frames, rig, steps: int, max_tiles: int, *, device=None, backend=None, c
         optimiser.zero_grad()
         loss = loss_fn()
         loss.backward()
-        evaluations.append(float(loss))
+        evaluations.append(float(loss.detach()))
         return loss
 
     optimiser.step(closure)
