@@ -1,8 +1,11 @@
 """The full 2-D peak of each pair correlation (docs/calibration.md §2): whole-lag maximum within ``REACH`` of
-the centre, then a parabola through it and its neighbours along each axis. Torch, differentiable with respect
+the centre, then a parabola through the logarithms of it and its neighbours along each axis (exact for a
+Gaussian peak, which the low-passed phase correlation resembles; the plain values where a neighbour is not
+positive). Torch, differentiable with respect
 to the correlation values (the maximum's position is piecewise constant), so the gradient calibration uses the
-same locator as the LMA one. A parabola pulls sub-lag peaks toward whole lags; calibration iterates to peaks
-at lag 0, where that bias vanishes."""
+same locator as the LMA one. A parabola through the plain values pulls sub-lag peaks toward whole lags (a
+peak 0.4 lag off read ~0.3: calibration rounds converged at half the pace); calibration iterates to peaks at
+lag 0, where either has no bias."""
 
 from __future__ import annotations
 
@@ -31,7 +34,10 @@ def pair_peaks(corr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     ok = torch.ones_like(c0, dtype=torch.bool)
     for dy, dx, i in ((0, 1, ix), (1, 0, iy)):
         minus, plus = at(-dy, -dx), at(dy, dx)
-        denom = minus - 2 * c0 + plus
+        positive = (minus > 0) & (plus > 0) & (c0 > 0)
+        tiny = torch.finfo(corr.dtype).tiny  # keeps the unused log branch finite (no NaN in the backward pass)
+        minus, centre, plus = (torch.where(positive, torch.log(v.clamp(min=tiny)), v) for v in (minus, c0, plus))
+        denom = minus - 2 * centre + plus
         curved = denom < 0
         frac = 0.5 * (minus - plus) / torch.where(curved, denom, torch.ones_like(denom))
         lags.append(i - r + frac.clamp(-0.5, 0.5))
