@@ -185,7 +185,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 BACKEND_HELP = (f"tile-processor kernels (default: warp for frames of at most {SMALL_FRAME_PIXELS} pixels, whose "
                 "start-up dominates; else taichi on the CPU, warp on CUDA)")
 OVERWRITE_HELP = "replace the files of a non-empty output folder (default: refuse it)"
-BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz")
+BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz", "calibration")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -300,6 +300,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "from the scenes' raw frames every EPOCHS epochs (a second pass converges instead of drifting)")
     tr.set_defaults(func=_cmd_train)
 
+    from tpnet_gpu import cli_calibrate  # noqa: PLC0415 - each subcommand in its own module
+    cli_calibrate.add_parser(sub)
     bench = sub.add_parser("bench", help="run a benchmark of tpnet_gpu.bench (table + JSON)",
                            description="Runs tpnet_gpu.bench.bench_NAME (also `python -m tpnet_gpu.bench.bench_NAME`) "
                                        "with the remaining arguments, e.g. `tpnet bench tp --height 480 --width 640`.")

@@ -1,0 +1,77 @@
+"""``tpnet calibrate SCENE... --rig IN --out OUT``: fit the quad's extrinsic corrections to scene folders
+(``tpnet_gpu.calibration.calibrate``, docs/calibration.md) and write the calibrated rig file."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+
+def write_rig_atomically(rig, out: Path, *, overwrite: bool, description: str) -> Path:
+    """Write ``rig`` (``Rig.to_file``) to a temporary file beside ``out``, then rename it into place: ``out`` is
+    either the old file or the whole new one. An existing ``out`` is refused without ``overwrite``."""
+    if out.exists() and not overwrite:
+        raise ValueError(f"--out: expected a new file (or --overwrite), got {out}, which exists")
+    if out.suffix.lower() not in (".json", ".toml"):
+        raise ValueError(f"--out: expected a .json or .toml rig file, got {out}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.tmp-", suffix=out.suffix, dir=out.parent)
+    os.close(fd)
+    try:
+        rig.to_file(tmp, description=description)
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return out
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from tpnet_gpu import rigfile
+    from tpnet_gpu.calibration import CalibrationConfig, Frame, calibrate, edge_misalignment
+    from tpnet_gpu.scenes.folder import load
+
+    out = Path(args.out)
+    if out.exists() and not args.overwrite:  # before the work, not after it
+        raise ValueError(f"--out: expected a new file (or --overwrite), got {out}, which exists")
+    if args.rounds < 1:
+        raise ValueError(f"--rounds: expected at least 1, got {args.rounds}")
+    rig = rigfile.load(args.rig)
+    frames = []
+    for folder in args.scenes:
+        if not Path(folder).is_dir():
+            raise FileNotFoundError(f"SCENE: expected a scene folder, got {folder!r}, which is not a folder")
+        scene = load(folder)
+        if (scene.rig.width, scene.rig.height) != (rig.width, rig.height):
+            raise ValueError(f"{folder}: expected {rig.width}x{rig.height} frames (--rig), got "
+                             f"{scene.rig.width}x{scene.rig.height}")
+        frames.append(Frame(scene.frames, scene.cfa))
+    result = calibrate(frames, rig, method=args.method, config=CalibrationConfig(rounds=args.rounds),
+                       device=args.device, log=lambda m: print(m, file=sys.stderr))
+    moved = edge_misalignment(rig, result.extrinsics, rig.extrinsics)
+    write_rig_atomically(result.rig, out, overwrite=args.overwrite,
+                         description=f"calibrated by tpnet calibrate ({args.method}) from {len(frames)} scene(s)")
+    last = result.rounds[-1]
+    print(f"calibrated {len(frames)} scene(s) by {args.method} in {len(result.rounds)} rounds, "
+          f"{result.seconds:.1f} s: frame edge moved {moved:.3f} px from --rig, {last.get('tiles')} tiles -> {out}")
+    return 0
+
+
+def add_parser(sub) -> None:
+    cal = sub.add_parser("calibrate", help="fit the quad's extrinsic corrections to scene folders: a calibrated "
+                         "rig file", description="Field calibration (docs/calibration.md): the pairs' 2-D peaks of "
+                         "many tiles give the rig's 13 extrinsic corrections (tilt, azimuth, roll, zoom), fitted by "
+                         "a robust LMA (or gradient descent through the differentiable tile processor) with "
+                         "re-correlation; the common roll and the toe-in are unobservable and left as in --rig.")
+    cal.add_argument("scenes", nargs="+", metavar="SCENE", help="scene folders of one rig (cam*.dng + scene.json)")
+    cal.add_argument("--rig", required=True, metavar="IN",
+                     help="the rig to start from: a rig file (.json/.toml, docs/rig_file.md) or a shipped one (quad)")
+    cal.add_argument("--out", required=True, metavar="OUT", help="the calibrated rig file to write (.json/.toml)")
+    cal.add_argument("--method", choices=("lma", "gradient"), default="lma", help="the fit (default lma)")
+    cal.add_argument("--rounds", type=int, default=4, help="most measure + fit rounds (default 4)")
+    cal.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
+    cal.add_argument("--overwrite", action="store_true", help="replace an existing --out file (default: refuse)")
+    cal.set_defaults(func=_cmd_calibrate)
