@@ -307,6 +307,10 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("args", nargs=argparse.REMAINDER,
                        help="arguments for the benchmark (see `tpnet bench NAME --help`)")
     bench.set_defaults(func=_cmd_bench)
+
+    from tpnet_gpu import cli_export  # noqa: PLC0415 - subcommands in their own modules
+
+    cli_export.add_parser(sub)
     return parser
 
 
