@@ -37,6 +37,34 @@ def test_ray_options_without_the_extra_or_without_ray_end_in_one_line(tmp_path, 
     assert not (tmp_path / "o").exists() and not (tmp_path / "d").exists()
 
 
+def test_plan_skips_finished_scenes_and_refuses_bad_inputs(tmp_path):
+    # no Ray needed: which scenes a run does (a present, non-empty output folder is a finished scene)
+    from tpnet_gpu.cli import build_parser
+    from tpnet_gpu.cli_ray import _plan
+
+    for name in ("a", "b", "c"):
+        (tmp_path / "in" / name).mkdir(parents=True)
+    (tmp_path / "out" / "a").mkdir(parents=True)
+    (tmp_path / "out" / "a" / "disparity.tif").write_bytes(b"done")
+    (tmp_path / "out" / "b").mkdir()  # an empty folder is not a finished scene
+    inputs = [str(tmp_path / "in" / n) for n in ("a", "b", "c")]
+    args = build_parser().parse_args(["process", "--ray", *inputs, "--out", str(tmp_path / "out")])
+    todo, done = _plan(args)
+    assert done == ["a"] and [t["out"] for t in todo] == [str(tmp_path / "out" / n) for n in ("b", "c")]
+    args.overwrite = True
+    assert len(_plan(args)[0]) == 3
+    args.inputs = [*inputs, str(tmp_path / "out" / "a" / "disparity.tif")]
+    with pytest.raises(ValueError, match=r"inputs: expected scene folders with --ray, got .*disparity.tif"):
+        _plan(args)
+    (tmp_path / "other" / "a").mkdir(parents=True)
+    args.inputs = [*inputs, str(tmp_path / "other" / "a")]
+    with pytest.raises(ValueError, match="inputs: expected scene folders of different names .* got a more than once"):
+        _plan(args)
+    args.inputs, args.out = inputs, str(tmp_path / "in" / "a" / "out")
+    with pytest.raises(ValueError, match="--out: expected a folder apart from the inputs"):
+        _plan(args)
+
+
 @pytest.fixture(scope="module")
 def local_ray():
     pytest.importorskip("ray", reason="the ray extra is not installed (pip install 'tpnet-gpu[ray]')")

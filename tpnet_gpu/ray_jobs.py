@@ -102,8 +102,6 @@ def run_pool(items: list[dict], worker: type, kwargs: dict, options: RayOptions,
             for row in data.iter_rows():
                 rows.append(row)
                 bar.update()
-                if row.get("error"):
-                    bar.write(f"{row['scene']}: error: {row['error']}")
         return rows
 
 
