@@ -56,6 +56,10 @@ def _disparity(text: str | None, option: str, *, positive: bool) -> float | None
 
 
 def _cmd_process(args: argparse.Namespace) -> int:
+    if args.ray or args.address is not None or args.workers is not None:  # scene folders on Ray (cli_ray.py)
+        from tpnet_gpu.cli_ray import process_scenes  # noqa: PLC0415
+
+        return process_scenes(args)
     import numpy as np
     import tifffile
 
@@ -153,7 +157,9 @@ def _cmd_dataset(args: argparse.Namespace) -> int:
     spec = DatasetSpec(scenes=args.scenes, width=args.width, height=args.height, test_fraction=args.test_fraction,
                        seed=args.seed, supersample=args.supersample, rig=rig)
     start = time.perf_counter()
-    folder = build(args.out, spec, device=args.device)
+    from tpnet_gpu.cli_ray import options  # noqa: PLC0415
+
+    folder = build(args.out, spec, device=args.device, ray=options(args))
     print(f"data set of {spec.scenes} scenes ({spec.width}x{spec.height}) in {time.perf_counter() - start:.0f} s "
           f"-> {folder}")
     return 0
@@ -185,7 +191,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 BACKEND_HELP = (f"tile-processor kernels (default: warp for frames of at most {SMALL_FRAME_PIXELS} pixels, whose "
                 "start-up dominates; else taichi on the CPU, warp on CUDA)")
 OVERWRITE_HELP = "replace the files of a non-empty output folder (default: refuse it)"
-BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz", "calibration")
+BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz", "calibration", "ray")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -309,6 +315,11 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("args", nargs=argparse.REMAINDER,
                        help="arguments for the benchmark (see `tpnet bench NAME --help`)")
     bench.set_defaults(func=_cmd_bench)
+
+    from tpnet_gpu import cli_export, cli_ray  # noqa: PLC0415 - subcommands and options in their own modules
+
+    cli_export.add_parser(sub)
+    cli_ray.add_options(proc, data)
     return parser
 
 
