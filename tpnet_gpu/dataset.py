@@ -18,6 +18,7 @@ made, so training sees what the pipeline feeds the network.
 from __future__ import annotations
 
 import json
+import logging
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -27,6 +28,8 @@ import torch
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import DatasetSpec  # noqa: F401 - DatasetSpec re-exported
 from tpnet_gpu.scenes import Sensor, random_scene, render
+
+log = logging.getLogger(__name__)
 
 FORMAT = "tpnet-dataset"
 VERSION = 4  # 4: + the raw frames, the engine's measured mask and the window surfaces (re-measuring at new targets)
@@ -120,19 +123,22 @@ def remeasure(chunk: dict, target: np.ndarray, engine, processor, layers) -> np.
 def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = None, progress: bool = True) -> Path:
     """Build the data set into ``folder`` (one NPZ per scene + ``manifest.json``); resumes: chunks already
     present are kept."""
-    from tqdm import tqdm  # noqa: PLC0415
+    from tpnet_gpu.progress import bar  # noqa: PLC0415
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     engine, processor, layers = measurers(spec, device)
     labels = spec.split()
     chunks = []
-    for index in tqdm(range(spec.scenes), desc="scenes", disable=not progress):
+    for index in bar(range(spec.scenes), desc="scenes", unit="scene", progress=progress):
         path = folder / f"scene_{index:04d}.npz"
         if not path.exists():
             tmp = path.with_suffix(".tmp.npz")
             np.savez_compressed(tmp, **build_scene(index, spec, engine, processor, layers))
             tmp.replace(path)
+            log.info("scene %d of %d: %s", index + 1, spec.scenes, path)
+        else:
+            log.debug("scene %d of %d: kept %s", index + 1, spec.scenes, path)
         chunks.append({"file": path.name, "split": labels[index], "scene": index})
     manifest = {"format": FORMAT, "version": VERSION, "spec": asdict(spec), "variants": list(spec.variants()),
                 "lags": [list(lag) for lag in layers.lags], "chunks": chunks}
