@@ -48,15 +48,15 @@ def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int =
     out = outputs.check(out, overwrite=overwrite)  # before the work, not after it
     rig = Rig(width=width, height=height)
     with Steps(rig.cams + 4, desc="demo", logger=log, progress=progress) as step:
+        step("pipeline set-up")  # first: weights that do not fit are refused before the render
+        start = time.perf_counter()
+        pipeline = Pipeline(height, width, weights=weights, device=device, backend=backend)
+        t_setup = time.perf_counter() - start
         start = time.perf_counter()
         rendered = render(demo_scene(rig, seed=seed), rig, sensor=Sensor(), seed=seed,
                           progress=lambda m: step(f"rendering {m}"))
         t_render = time.perf_counter() - start
         frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
-        step("pipeline set-up")
-        start = time.perf_counter()
-        pipeline = Pipeline(height, width, weights=weights, device=device, backend=backend)
-        t_setup = time.perf_counter() - start
         step("first frame (kernels compile or load)")
         pipeline.process(frames)
         step("timed frame")

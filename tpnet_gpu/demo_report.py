@@ -39,7 +39,7 @@ def write_truth(folder: Path, maps: FrameMaps, gt: np.ndarray, initial: np.ndarr
                           ERROR_SCALE_PX)
     engine_error = fig.Panel(np.abs(initial - gt), "|error|: disparity engine (network input)",
                              "|disparity - ground truth|", "px", "inferno", 0.0, ERROR_SCALE_PX)
-    depth = fig.Panel(pointcloud.depth(gt, maps.rig), "ground truth depth", "depth Z", "m", "turbo_r")
+    depth = fig.Panel(pointcloud.depth(gt, maps.rig), "ground truth depth", "depth Z", "m", "turbo_r", log=True)
     size = maps.size
     fig.save(folder / "ground_truth.png", gt_panel, title=f"scene {scene}", size=size)
     fig.save(folder / "error.png", abs_error, title=f"scene {scene}", size=size)

@@ -19,7 +19,6 @@ from tpnet_gpu.layout import TILE_STRIDE
 WIDTH_IN = 6.4  # one panel's width, inches: 640 px at DPI
 DPI = 100
 NO_VALUE = "0.6"  # grey of tiles without a value (matplotlib's grey level string)
-LOG_RANGE = 4.0  # a map whose finite values span more than this ratio (depth) gets a log colour scale
 
 
 @dataclass(frozen=True)
@@ -32,6 +31,7 @@ class Panel:
         label, unit: the colour bar's quantity and unit (a tile map only), e.g. "disparity", "px".
         cmap: matplotlib colour map name.
         low, high: the colour scale's ends (None: the 1st / 99th percentile of the finite values).
+        log: a logarithmic colour scale (depth: near and far tiles both readable), when its ends are positive.
     """
 
     values: np.ndarray
@@ -41,6 +41,7 @@ class Panel:
     cmap: str = "viridis"
     low: float | None = None
     high: float | None = None
+    log: bool = False
 
     @property
     def is_image(self) -> bool:
@@ -63,7 +64,7 @@ def _norm(panel: Panel):
     low = panel.low if panel.low is not None else (float(np.percentile(finite, 1)) if finite.size else 0.0)
     high = panel.high if panel.high is not None else (float(np.percentile(finite, 99)) if finite.size else 1.0)
     high = high if high > low else low + 1.0
-    if low > 0 and high / low > LOG_RANGE:
+    if panel.log and low > 0:
         return colors.LogNorm(low, high), True
     return colors.Normalize(low, high), False
 

@@ -89,7 +89,8 @@ def map_panels(maps: FrameMaps, what: str, *, low: float | None = None, high: fl
         "disparity": Panel(maps.disparity, f"disparity: {what}", "disparity", "px", "turbo", low, high),
         "confidence": Panel(maps.confidence, f"confidence: {what}", "correlation peak strength", "unitless",
                             "magma", 0.0),
-        "depth": Panel(pointcloud.depth(maps.disparity, maps.rig), f"depth: {what}", "depth Z", "m", "turbo_r"),
+        "depth": Panel(pointcloud.depth(maps.disparity, maps.rig), f"depth: {what}", "depth Z", "m", "turbo_r",
+                       log=True),
     }
 
 
