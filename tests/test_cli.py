@@ -5,6 +5,7 @@ their call and return known tile maps (the disparity engine of issue 13 is not t
 rules of docs/rig_file.md §8."""
 
 import json
+import shutil
 import signal
 import subprocess
 import sys
@@ -38,6 +39,31 @@ def test_demo_writes_pictures_and_report(tmp_path, capsys):
     np.testing.assert_allclose(tifffile.imread(tmp_path / "error.tif"), tifffile.imread(tmp_path / "disparity.tif")
                                - tifffile.imread(tmp_path / "ground_truth.tif"), atol=1e-6)
     assert "![comparison](comparison.png)" in (tmp_path / "report.md").read_text()
+
+
+@pytest.mark.slow
+def test_demo_weights_a_trained_file_and_one_for_another_rig(tmp_path, capsys, monkeypatch):
+    # Oracle: a copy of the shipped quad weights is the network the demo reports (by its file name) and reaches
+    # the demo's accuracy; the binocular weights (other layer lags) are refused before anything is rendered.
+    from tpnet_gpu.net import infer
+
+    mine = tmp_path / "mine.pt"
+    shutil.copy(infer.DEFAULT_WEIGHTS, mine)
+    shutil.copy(infer.DEFAULT_WEIGHTS.with_suffix(".json"), mine.with_suffix(".json"))
+    argv = ["demo", "--width", "160", "--height", "128", "--no-figures"]
+    assert main([*argv, "--out", str(tmp_path / "a"), "--weights", str(mine)]) == 0
+    report = json.loads((tmp_path / "a" / "report.json").read_text())
+    assert report["method"] == "TPNET, weights mine.pt" and report["stats"]["tpnet"]["flat"]["median_abs"] < 0.2
+    assert {p.name for p in (tmp_path / "a").glob("*.png")} == {"texture.png", "correlations.png"}  # no figures
+    capsys.readouterr()
+    binocular = infer.WEIGHTS_DIR / "tpnet_binocular_v1.pt"
+
+    def render(*args, **kwargs):
+        raise AssertionError("rendered before the weights were checked")
+
+    monkeypatch.setattr("tpnet_gpu.scenes.render", render)
+    assert main([*argv, "--out", str(tmp_path / "b"), "--weights", str(binocular)]) == 2
+    assert capsys.readouterr().err.startswith("tpnet demo: error: weights:")
 
 
 def test_process_scene_folder_and_bad_inputs(tmp_path, capsys):

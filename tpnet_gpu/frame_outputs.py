@@ -87,8 +87,8 @@ def map_panels(maps: FrameMaps, what: str, *, low: float | None = None, high: fl
 
     return {
         "disparity": Panel(maps.disparity, f"disparity: {what}", "disparity", "px", "turbo", low, high),
-        "confidence": Panel(maps.confidence, f"confidence: {what}", "correlation peak strength", "unitless",
-                            "magma", 0.0),
+        "confidence": Panel(maps.confidence, "confidence: disparity engine", "correlation peak strength",
+                            "unitless", "magma", 0.0),
         "depth": Panel(pointcloud.depth(maps.disparity, maps.rig), f"depth: {what}", "depth Z", "m", "turbo_r",
                        log=True),
     }
