@@ -58,9 +58,15 @@ def _disparity(text: str | None, option: str, *, positive: bool) -> float | None
 
 
 def _cmd_process(args: argparse.Namespace) -> int:
+    from tpnet_gpu.progress import Steps
+
+    with Steps(4, desc="process", logger=logging.getLogger("tpnet_gpu.cli")) as step:
+        return _process(args, step)
+
+
+def _process(args: argparse.Namespace, step) -> int:
     from tpnet_gpu import frame_outputs
     from tpnet_gpu.outputs import check, output_folder
-    from tpnet_gpu.progress import Steps
     from tpnet_gpu.stereo_io import load_inputs, make_pipeline
 
     max_d = _disparity(args.max_disparity, "--max-disparity", positive=True)
@@ -68,32 +74,31 @@ def _cmd_process(args: argparse.Namespace) -> int:
     if max_d is not None and min_d >= max_d:
         raise ValueError(f"--min-disparity: expected less than --max-disparity {max_d:g}, got {min_d:g}")
     out = check(args.out, overwrite=args.overwrite, inputs=args.inputs)  # before the work, not after it
-    with Steps(4, desc="process", logger=logging.getLogger("tpnet_gpu.cli")) as step:
-        step("reading the inputs")
-        inputs = load_inputs(args.inputs, rig=args.rig, cfa=args.cfa, colour=args.colour, reference=args.reference)
-        if inputs.kind in ("pair", "images") and max_d is None:
-            raise ValueError("--max-disparity: required for ordinary images (the largest disparity searched, px)")
-        frames = inputs.frames
-        (height, width), (h, w) = frames.padded, frames.size
-        step("pipeline set-up")
-        start = time.perf_counter()
-        with _one_shot(height, width, args.backend) as backend:
-            pipeline = make_pipeline(height, width, cfa=frames.cfa, rig=inputs.rig, min_disparity=min_d,
-                                     max_disparity=max_d, weights=args.weights, device=args.device, backend=backend)
-            step("frame")
-            result = pipeline.process(frames.frames)
-        seconds = time.perf_counter() - start
-        step("outputs" + ("" if args.no_figures else " and figures"))
-        maps = frame_outputs.from_result(result, inputs.rig, frames=frames,
-                                         white=frames.white_level if inputs.kind in ("pair", "images") else None)
-        scene = " ".join(p.name for p in map(Path, args.inputs))
-        with output_folder(out, overwrite=args.overwrite, inputs=args.inputs) as folder:
-            written = frame_outputs.write(folder, maps, scene=scene, what=frame_outputs.method(pipeline),
-                                          figures=not args.no_figures)
+    step("reading the inputs")
+    inputs = load_inputs(args.inputs, rig=args.rig, cfa=args.cfa, colour=args.colour, reference=args.reference)
+    if inputs.kind in ("pair", "images") and max_d is None:
+        raise ValueError("--max-disparity: required for ordinary images (the largest disparity searched, px)")
+    frames = inputs.frames
+    (height, width), (h, w) = frames.padded, frames.size
+    step("pipeline set-up")
+    start = time.perf_counter()
+    with _one_shot(height, width, args.backend) as backend:
+        pipeline = make_pipeline(height, width, cfa=frames.cfa, rig=inputs.rig, min_disparity=min_d,
+                                 max_disparity=max_d, weights=args.weights, device=args.device, backend=backend)
+        step("frame")
+        result = pipeline.process(frames.frames)
+    seconds = time.perf_counter() - start
+    step("outputs" + ("" if args.no_figures else " and figures"))
+    maps = frame_outputs.from_result(result, inputs.rig, frames=frames,
+                                     white=frames.white_level if inputs.kind in ("pair", "images") else None)
+    scene = " ".join(p.name for p in map(Path, args.inputs))
+    with output_folder(out, overwrite=args.overwrite, inputs=args.inputs) as folder:
+        written = frame_outputs.write(folder, maps, scene=scene, what=frame_outputs.method(pipeline),
+                                      figures=not args.no_figures)
+    step.close()  # the bar off the terminal before the report
     what = {"scene": "scene", "raw": f"raw ({frames.cfa})", "pair": "stereo pair", "images": "image"}[inputs.kind]
-    print(f"processed {w}x{h} {what} frame of {frames.cams} cameras in {seconds:.1f} s "
-          f"({frame_outputs.method(pipeline)}) -> {out}: {', '.join(written)} "
-          f"({maps.disparity.shape[1]}x{maps.disparity.shape[0]} tiles)")
+    print(f"processed {w}x{h} {what} frame of {frames.cams} cameras in {seconds:.1f} s -> {out}: {', '.join(written)} "
+          f"({maps.disparity.shape[1]}x{maps.disparity.shape[0]} tiles; {frame_outputs.method(pipeline)})")
     return 0
 
 

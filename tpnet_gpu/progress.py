@@ -41,13 +41,15 @@ def bar(iterable: Iterable | None = None, *, desc: str, total: int | None = None
 
 class Steps:
     """A bar over the named steps of one command (``total`` of them): ``steps("rendering")`` starts the next
-    step, showing its name; ``steps.close()`` (or the ``with`` block's end) removes the bar. Each step is logged
+    step, showing its name; ``steps.close()`` (or the ``with`` block's end; closing twice is fine) removes the bar,
+    so a report printed after it starts on a clean line. Each step is logged
     at INFO on ``logger`` too, so ``tpnet -v`` tells the same story in a log."""
 
     def __init__(self, total: int, *, desc: str, logger: logging.Logger, progress: bool = True):
         self._bar = bar(desc=desc, total=total, unit="step", progress=progress)
         self._log = logger
         self._started = False
+        self._closed = False
 
     def __call__(self, step: str) -> None:
         if self._started:
@@ -57,6 +59,9 @@ class Steps:
         self._log.info("%s", step)
 
     def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
         if self._started:
             self._bar.update(1)
         self._bar.close()
