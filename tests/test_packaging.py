@@ -16,7 +16,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 ROOTS = {"tpnet_gpu": "tpnet_gpu", "tpnet_gpu.kernels": "kernels", "tpnet_gpu.net": "net", "tpnet_gpu.bench": "bench"}
-OPTIONAL = {"cv2", "matplotlib"}  # the bench extra
+OPTIONAL = {"cv2"}  # the bench extra (matplotlib is a dependency: the figures)
 ALIAS = {"skimage": "scikit-image", "PIL": "pillow", "warp": "warp-lang", "cv2": "opencv-python-headless"}
 
 

@@ -18,6 +18,7 @@ made, so training sees what the pipeline feeds the network.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import tempfile
 from dataclasses import asdict, dataclass, replace
@@ -29,6 +30,8 @@ import torch
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import DatasetSpec  # noqa: F401 - DatasetSpec re-exported
 from tpnet_gpu.scenes import Sensor, random_scene, render
+
+log = logging.getLogger(__name__)
 
 FORMAT = "tpnet-dataset"
 VERSION = 4  # 4: + the raw frames, the engine's measured mask and the window surfaces (re-measuring at new targets)
@@ -158,7 +161,7 @@ def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = Non
     """Build the data set into ``folder`` (one NPZ per scene + ``manifest.json``); resumes: chunks already
     present are kept. ``ray``: a ``tpnet_gpu.ray_jobs.RayOptions`` to spread the missing scenes over Ray
     workers (the same chunks, bit for bit), or None to build them here, one after another."""
-    from tqdm import tqdm  # noqa: PLC0415
+    from tpnet_gpu.progress import bar  # noqa: PLC0415
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -169,8 +172,8 @@ def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = Non
         build_chunks(folder, spec, missing, ray, device=device, progress=progress)
     elif missing:
         engine, processor, layers = measurers(spec, device)
-        for index in tqdm(missing, desc="scenes", disable=not progress):
-            write_chunk(folder, index, spec, engine, processor, layers)
+        for index in bar(missing, desc="scenes", unit="scene", progress=progress):
+            log.info("scene %d of %d: %s", index + 1, spec.scenes, write_chunk(folder, index, spec, engine, processor, layers))
     write_manifest(folder, spec)
     return folder
 

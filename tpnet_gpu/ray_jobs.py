@@ -82,7 +82,7 @@ def run_pool(items: list[dict], worker: type, kwargs: dict, options: RayOptions,
              progress: bool = True) -> list[dict]:
     """Every item (a row of plain values) through ``worker(**kwargs)(batch)`` on a Ray actor pool, one item per
     call; returns the rows the workers return, as they finish (a progress bar counts them)."""
-    from tqdm import tqdm  # noqa: PLC0415
+    from tpnet_gpu.progress import bar as progress_bar  # noqa: PLC0415
 
     if not items:
         return []
@@ -98,7 +98,7 @@ def run_pool(items: list[dict], worker: type, kwargs: dict, options: RayOptions,
         data = data.map_batches(worker, fn_constructor_kwargs=kwargs, batch_size=1, compute=pool,
                                 num_cpus=0 if gpu else 1, num_gpus=1 if gpu else 0)
         rows = []
-        with tqdm(total=len(items), desc=desc, unit="scene", disable=not progress) as bar:
+        with progress_bar(total=len(items), desc=desc, unit="scene", progress=progress) as bar:
             for row in data.iter_rows():
                 rows.append(row)
                 bar.update()
