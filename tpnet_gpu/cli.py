@@ -185,7 +185,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 BACKEND_HELP = (f"tile-processor kernels (default: warp for frames of at most {SMALL_FRAME_PIXELS} pixels, whose "
                 "start-up dominates; else taichi on the CPU, warp on CUDA)")
 OVERWRITE_HELP = "replace the files of a non-empty output folder (default: refuse it)"
-BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz")
+BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz", "flow")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -299,6 +299,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="train on the network's own pass too: its prediction from the heuristic targets, re-measured "
                          "from the scenes' raw frames every EPOCHS epochs (a second pass converges instead of drifting)")
     tr.set_defaults(func=_cmd_train)
+
+    from tpnet_gpu import cli_flow  # noqa: PLC0415 - tpnet flow, in its own module
+
+    cli_flow.add_parser(sub)
 
     bench = sub.add_parser("bench", help="run a benchmark of tpnet_gpu.bench (table + JSON)",
                            description="Runs tpnet_gpu.bench.bench_NAME (also `python -m tpnet_gpu.bench.bench_NAME`) "

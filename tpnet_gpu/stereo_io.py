@@ -289,3 +289,14 @@ def make_pipeline(height: int, width: int, *, cfa: str | None, rig: Rig, min_dis
 
     return Pipeline(height, width, cfa=cfa, rig=rig, min_disparity=min_disparity, max_disparity=max_disparity,
                     device=device, backend=backend)
+
+
+def load_frame(path, *, cfa: str | None = None, colour: str = "luma") -> Frames:
+    """One frame of a camera or rig (e.g. of a sequence, ``tpnet flow``): a scene folder (its cameras), a raw
+    file (DNG, ..., or a TIFF mosaic with ``cfa``; one Bayer frame) or an ordinary image (mono by ``colour``)."""
+    path = Path(path)
+    if path.is_dir():
+        return _scene_frames(path)[0]
+    if not path.exists():
+        raise FileNotFoundError(f"path: no such scene folder or file: {path}")
+    return _raw_frames([path], cfa) if _is_raw(path, cfa) else load_images([path], colour=colour, names=[str(path)])
