@@ -77,7 +77,8 @@ def _cmd_process(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     with _one_shot(height, width, args.backend) as backend:
         pipeline = make_pipeline(height, width, cfa=frames.cfa, rig=inputs.rig, min_disparity=min_d,
-                                 max_disparity=max_d, device=args.device, backend=backend)
+                                 max_disparity=max_d, device=args.device, backend=backend,
+                                 two_surface=args.two_surface)
         result = pipeline.process(frames.frames)
     seconds = time.perf_counter() - start
     disparity = frames.crop_tiles(result.disparity.cpu().numpy())
@@ -87,6 +88,11 @@ def _cmd_process(args: argparse.Namespace) -> int:
                          frames.crop_tiles(result.confidence.cpu().numpy()).astype(np.float32))
         save_png(folder / "disparity.png", _upscale(colour_ramp(disparity, min_d))[:h, :w])
         written = "disparity.tif/.png, confidence.tif"
+        if result.surfaces is not None:  # --two-surface: NaN where the tile shows one surface
+            for name in ("foreground", "background", "w_foreground"):
+                tifffile.imwrite(folder / f"{name}.tif",
+                                 frames.crop_tiles(getattr(result.surfaces, name).cpu().numpy()).astype(np.float32))
+            written += ", foreground/background/w_foreground.tif"
         if result.texture is not None:
             texture = frames.crop_image(result.texture.cpu().numpy())
             tifffile.imwrite(folder / "texture.tif", texture.astype(np.float32), photometric="minisblack")  # RGBA
@@ -185,7 +191,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 BACKEND_HELP = (f"tile-processor kernels (default: warp for frames of at most {SMALL_FRAME_PIXELS} pixels, whose "
                 "start-up dominates; else taichi on the CPU, warp on CUDA)")
 OVERWRITE_HELP = "replace the files of a non-empty output folder (default: refuse it)"
-BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz", "flow")
+BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz", "flow", "two_surface")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -240,6 +246,8 @@ def build_parser() -> argparse.ArgumentParser:
     proc.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     proc.add_argument("--backend", choices=BACKENDS, default=None, help=BACKEND_HELP)
     proc.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP + "; never an input's folder")
+    proc.add_argument("--two-surface", action="store_true", help="also foreground.tif, background.tif and "
+                      "w_foreground.tif: both disparities of tiles whose correlation shows two surfaces (NaN: one)")
     proc.set_defaults(func=_cmd_process)
 
     rend = sub.add_parser("render", help="render a synthetic quad-camera scene folder (DNGs + ground truth)")

@@ -282,13 +282,14 @@ def load_inputs(paths, *, rig=None, cfa: str | None = None, colour: str = "luma"
 
 
 def make_pipeline(height: int, width: int, *, cfa: str | None, rig: Rig, min_disparity: float = 0.0,
-                  max_disparity: float | None = None, device: str | None = None, backend: str | None = None):
+                  max_disparity: float | None = None, device: str | None = None, backend: str | None = None,
+                  two_surface: bool = False):
     """The pipeline for frames of ``height`` x ``width`` from ``rig`` (any camera count; ``max_disparity`` None:
-    the engine's default from the rig)."""
-    from tpnet_gpu.pipeline import Pipeline  # noqa: PLC0415 - torch, Warp and the model on use
+    the engine's default from the rig; ``two_surface``: also both surfaces of two-surface tiles)."""
+    from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415 - torch, Warp and the model on use
 
     return Pipeline(height, width, cfa=cfa, rig=rig, min_disparity=min_disparity, max_disparity=max_disparity,
-                    device=device, backend=backend)
+                    device=device, backend=backend, config=PipelineConfig(two_surface=two_surface))
 
 
 def load_frame(path, *, cfa: str | None = None, colour: str = "luma") -> Frames:

@@ -65,7 +65,6 @@ class Measurer:
         reach = min(sampler.reach, config.trust + 1.0)
         device = sampler.vectors.device
         self.offsets = torch.arange(-reach, reach + 1e-6, 1.0, device=device)  # whole-pixel search
-        self.window = PEAK_OFFSETS * torch.arange(-4, 5, device=device, dtype=torch.float32)  # +-1 px fine
 
     def measure(self, corr: torch.Tensor, active: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         tiles = corr.shape[0]
@@ -82,28 +81,35 @@ class Measurer:
         return residual, strength
 
     def _peak(self, corr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Whole-pixel peak of the combined correlation (bilinear, cheap), then a parabola through bicubic samples
-        at quarter pixels around it (bilinear samples of a sharp peak pull the parabola toward whole lags)."""
+        """Whole-pixel peak of the combined correlation (bilinear, cheap), then ``axis_peak`` around it."""
         raw = corr
         if self.widen:
             corr = gaussian_blur(corr, WIDEN_SIGMA)
         coarse = torch.nan_to_num(combine_pairs(self.sampler.sample(corr, self.offsets)), nan=-1.0)
         centre = self.offsets[torch.argmax(coarse, dim=1)]  # (T,)
-        fine = centre[:, None] + self.window[None, :]  # (T, 9)
-        combined = torch.nan_to_num(combine_pairs(self.sampler.sample(corr, fine, "bicubic")), nan=-1.0)
-        j = torch.argmax(combined, dim=1, keepdim=True)
-        n = combined.shape[1]
-        c0 = torch.gather(combined, 1, j)
-        cm = torch.gather(combined, 1, (j - 1).clamp(min=0))
-        cp = torch.gather(combined, 1, (j + 1).clamp(max=n - 1))
-        frac, vertex = parabola_step(cm, c0, cp)
-        inner = (j > 0) & (j < n - 1) & vertex
-        e = torch.gather(fine, 1, j)[:, 0] + PEAK_OFFSETS * frac[:, 0]
-        ok = inner[:, 0]
-        strength = c0[:, 0]
+        e, strength, ok = axis_peak(self.sampler, corr, centre)
         if self.widen:
             strength = combine_pairs(self.sampler.sample(raw, e[:, None].nan_to_num(0.0), "bicubic"))[:, 0]
-        return torch.where(ok, e, torch.full_like(e, float("nan"))), torch.where(ok, strength, torch.zeros_like(e))
+        return e, torch.where(ok, strength, torch.zeros_like(e))
+
+
+def axis_peak(sampler: AxisSampler, corr: torch.Tensor, centre: torch.Tensor):
+    """The combined correlation's peak within +-1 px of ``centre (T,)`` (px along the pairs' axes): bicubic samples
+    at quarter pixels (bilinear samples of a sharp peak pull the parabola toward whole lags), the best one, and a
+    parabola through it and its neighbours. Returns ``(e (T,), value (T,), ok (T,))``; e NaN where the best
+    sample is at the window's end or no parabola vertex is a maximum."""
+    window = PEAK_OFFSETS * torch.arange(-4, 5, device=corr.device, dtype=torch.float32)  # +-1 px fine
+    fine = centre[:, None] + window[None, :]  # (T, 9)
+    combined = torch.nan_to_num(combine_pairs(sampler.sample(corr, fine, "bicubic")), nan=-1.0)
+    j = torch.argmax(combined, dim=1, keepdim=True)
+    n = combined.shape[1]
+    c0 = torch.gather(combined, 1, j)
+    cm = torch.gather(combined, 1, (j - 1).clamp(min=0))
+    cp = torch.gather(combined, 1, (j + 1).clamp(max=n - 1))
+    frac, vertex = parabola_step(cm, c0, cp)
+    ok = ((j > 0) & (j < n - 1) & vertex)[:, 0]
+    e = torch.gather(fine, 1, j)[:, 0] + PEAK_OFFSETS * frac[:, 0]
+    return torch.where(ok, e, torch.full_like(e, float("nan"))), c0[:, 0], ok
 
 
 def parabola_step(cm: torch.Tensor, c0: torch.Tensor, cp: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
