@@ -7,8 +7,9 @@ points projected at both times, ``scenes.motion.tile_flow``; the combined flow a
 is referenced to camera 0, so the renderer's per-tile truth (textured, one object) is camera 0's tile grid. The
 cameras are combined on their own image grids: right where the flow does not depend on depth across the cameras'
 disparity offsets (rotations, far scenes); a translation's flow at a near depth edge differs between them.
-Scored on textured single-object tiles (the renderer's tile confidence > 0.5) inside the border ring: median |error|, RMSE of the
-inliers (|error| <= 1 px), gross (|error| > 1 px) share of the measured ones, coverage (measured share).
+Scored on textured single-object tiles (the renderer's tile confidence > 0.5) inside the border ring: median
+|error|, RMSE of the inliers (|error| <= 1 px), gross (|error| > 1 px) share of the measured ones, coverage
+(measured share).
 """
 
 from __future__ import annotations

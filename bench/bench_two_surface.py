@@ -41,8 +41,9 @@ def score(fg, bg, single, surfaces, edge, flat, tolerance: float) -> dict:
     s1, s2 = surfaces[two_gt][:, 0], surfaces[two_gt][:, 1]
     f, b, d = fg[two_gt], bg[two_gt], single[two_gt]
     reported = np.isfinite(f) & np.isfinite(b)
-    both = reported & ((hits(f, s1, tolerance) & hits(b, s2, tolerance)) | (hits(f, s2, tolerance) & hits(b, s1, tolerance)))
-    either = reported & (hits(f, s1, tolerance) | hits(f, s2, tolerance) | hits(b, s1, tolerance) | hits(b, s2, tolerance))
+    f1, f2, b1, b2 = (hits(e, s, tolerance) for e, s in ((f, s1), (f, s2), (b, s1), (b, s2)))
+    both = reported & ((f1 & b2) | (f2 & b1))
+    either = reported & (f1 | f2 | b1 | b2)
     single_hit = hits(d, s1, tolerance) | hits(d, s2, tolerance)
     return {"edge_two_surface_tiles": int(two_gt.sum()), "reported_two": int(reported.sum()), "both": int(both.sum()),
             "either_of_two": int(either.sum()), "single_either": int(single_hit.sum()),

@@ -1,4 +1,5 @@
-"""Motion vectors: per-tile 2-D flow from one frame to the next, measured by the tile processor (issue 17 item 3).
+"""Motion vectors: per-tile 2-D flow from one frame to the next, measured by the tile processor (issue 17 item 3;
+motion_and_surfaces.md §1).
 
 Frames t and t+1 of the same camera are two "cameras" of one processor, correlated as a pair: frame t's tile sits
 on the tile grid (8 tx + 4, 8 ty + 4) of the camera's own image, frame t+1's at the grid plus the current flow

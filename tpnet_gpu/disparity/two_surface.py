@@ -1,5 +1,5 @@
 """Two-surface tiles: a foreground edge over the background gives a tile's correlation two peaks along the pairs'
-disparity axis; a two-peak fit reports both disparities and their weights (issue 17 item 4).
+disparity axis; a two-peak fit reports both disparities and their weights (issue 17 item 4; motion_and_surfaces.md §4).
 
 Per tile (``TwoSurfaceFit.measure``): the pairs' combined correlation (``combine_pairs`` of ``AxisSampler``
 samples, as the engine reads it) at offsets every ``STEP`` px within +-``reach`` of the tile's target; its two

@@ -1,4 +1,5 @@
-"""A rig that moves between frames: the scene as the moved rig sees it, and the ground-truth flow of each camera.
+"""A rig that moves between frames: the scene as the moved rig sees it, and the ground-truth flow of each camera
+(motion_and_surfaces.md §2).
 
 The renderer places the rig at the world origin, so a rig motion is rendered by moving the scene the other way:
 the rig at frame t+1 sits at ``translation`` (world mm, x right, y up, z toward the viewer) turned by
