@@ -228,8 +228,8 @@ class FlowEstimator:
             flow, strength, more = self.search(start, flow, strength)
             passes += more
         flow, strength, more = self.consistency(flow, strength)
-        # still apart from well-measured neighbours that agree: a false peak, not a motion edge (measured on
-        # tuning sequences, seeds < 10000: gross rate about halved, coverage -2 %)
+        # still apart from well-measured neighbours: a false peak, not a motion edge (one tuning scene, seed 7,
+        # 320x240, camera 0: gross 5.1 -> 1.4 % sideways, 9.9 -> 2.8 % forward; coverage 86 -> 82, 85 -> 78 %)
         median = self.neighbour_median(flow, least=OUTLIER_SUPPORT)
         isolated = torch.isfinite(median).all(dim=1) & ((flow - median).norm(dim=1) > self.config.outlier)
         flow = torch.where(isolated[:, None], torch.full_like(flow, float("nan")), flow)
