@@ -88,7 +88,7 @@ def _cmd_process(args: argparse.Namespace) -> int:
                          frames.crop_tiles(result.confidence.cpu().numpy()).astype(np.float32))
         save_png(folder / "disparity.png", _upscale(colour_ramp(disparity, min_d))[:h, :w])
         written = "disparity.tif/.png, confidence.tif"
-        if result.surfaces is not None:  # --two-surface: NaN where the tile shows one surface
+        if args.two_surface:  # NaN where the tile shows one surface
             for name in ("foreground", "background", "w_foreground"):
                 tifffile.imwrite(folder / f"{name}.tif",
                                  frames.crop_tiles(getattr(result.surfaces, name).cpu().numpy()).astype(np.float32))

@@ -288,8 +288,9 @@ def make_pipeline(height: int, width: int, *, cfa: str | None, rig: Rig, min_dis
     the engine's default from the rig; ``two_surface``: also both surfaces of two-surface tiles)."""
     from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415 - torch, Warp and the model on use
 
+    extra = {"config": PipelineConfig(two_surface=True)} if two_surface else {}
     return Pipeline(height, width, cfa=cfa, rig=rig, min_disparity=min_disparity, max_disparity=max_disparity,
-                    device=device, backend=backend, config=PipelineConfig(two_surface=two_surface))
+                    device=device, backend=backend, **extra)
 
 
 def load_frame(path, *, cfa: str | None = None, colour: str = "luma") -> Frames:
