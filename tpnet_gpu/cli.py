@@ -88,7 +88,8 @@ def _process(args: argparse.Namespace, step) -> int:
     start = time.perf_counter()
     with _one_shot(height, width, args.backend) as backend:
         pipeline = make_pipeline(height, width, cfa=frames.cfa, rig=inputs.rig, min_disparity=min_d,
-                                 max_disparity=max_d, weights=args.weights, device=args.device, backend=backend)
+                                 max_disparity=max_d, weights=args.weights, device=args.device, backend=backend,
+                                 two_surface=args.two_surface)
         step("frame")
         result = pipeline.process(frames.frames)
     seconds = time.perf_counter() - start
@@ -99,6 +100,8 @@ def _process(args: argparse.Namespace, step) -> int:
     with output_folder(out, overwrite=args.overwrite, inputs=args.inputs) as folder:
         written = frame_outputs.write(folder, maps, scene=scene, what=frame_outputs.method(pipeline),
                                       figures=not args.no_figures)
+        if args.two_surface:  # NaN where the tile shows one surface
+            written += frame_outputs.write_surfaces(folder, result.surfaces, frames)
     step.close()  # the bar off the terminal before the report
     what = {"scene": "scene", "raw": f"raw ({frames.cfa})", "pair": "stereo pair", "images": "image"}[inputs.kind]
     print(f"processed {w}x{h} {what} frame of {frames.cams} cameras in {seconds:.1f} s -> {out}: {', '.join(written)} "
@@ -198,7 +201,8 @@ OVERWRITE_HELP = "replace the files of a non-empty output folder (default: refus
 WEIGHTS_HELP = ("TPNET weights from `tpnet train` (default: the shipped ones for the rig); weights trained for another "
                 "rig or other colours are refused")
 NO_FIGURES_HELP = "write no labelled figures (PNG, matplotlib): faster; the TIFFs, points.ply and texture.png stay"
-BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz", "calibration", "ray")
+BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz", "calibration", "ray",
+           "flow", "two_surface")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -260,6 +264,8 @@ def build_parser() -> argparse.ArgumentParser:
     proc.add_argument("--weights", default=None, metavar="FILE", help=WEIGHTS_HELP)
     proc.add_argument("--no-figures", action="store_true", help=NO_FIGURES_HELP)
     proc.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP + "; never an input's folder")
+    proc.add_argument("--two-surface", action="store_true", help="also foreground.tif, background.tif and "
+                      "w_foreground.tif: both disparities of tiles whose correlation shows two surfaces (NaN: one)")
     proc.set_defaults(func=_cmd_process)
 
     rend = sub.add_parser("render", help="render a synthetic quad-camera scene folder (DNGs + ground truth)")
@@ -320,8 +326,11 @@ def build_parser() -> argparse.ArgumentParser:
                          "from the scenes' raw frames every EPOCHS epochs (a second pass converges instead of drifting)")
     tr.set_defaults(func=_cmd_train)
 
-    from tpnet_gpu import cli_calibrate  # noqa: PLC0415 - each subcommand in its own module
+    from tpnet_gpu import cli_calibrate, cli_flow  # noqa: PLC0415 - each subcommand in its own module
+
     cli_calibrate.add_parser(sub)
+    cli_flow.add_parser(sub)
+
     bench = sub.add_parser("bench", help="run a benchmark of tpnet_gpu.bench (table + JSON)",
                            description="Runs tpnet_gpu.bench.bench_NAME (also `python -m tpnet_gpu.bench.bench_NAME`) "
                                        "with the remaining arguments, e.g. `tpnet bench tp --height 480 --width 640`.")

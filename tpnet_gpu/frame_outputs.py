@@ -8,7 +8,9 @@ Files (tile maps are ``(ceil(h / 8), ceil(w / 8))``, one value per tile, for inp
   ``depth.tif`` float32 metres (NaN: unmeasured, +inf: disparity <= 0) - each with its figure ``NAME.png``;
 * ``points.ply``: one point per tile of finite positive disparity, metres, rig axes (``tpnet_gpu.pointcloud``);
 * ``texture.tif`` float32 ``(channels, h, w)`` (R, G, B, alpha or Y, alpha; the frames' units), ``texture.png``
-  its 8-bit picture (pixels, RGBA) and ``texture_figure.png`` that picture with axes and a title.
+  its 8-bit picture (pixels, RGBA) and ``texture_figure.png`` that picture with axes and a title;
+* with ``tpnet process --two-surface`` (``write_surfaces``): ``foreground.tif``, ``background.tif`` float32 px and
+  ``w_foreground.tif`` (the foreground's weight), NaN where the tile shows one surface.
 """
 
 from __future__ import annotations
@@ -138,3 +140,17 @@ def _figures(folder, maps: FrameMaps, *, scene: str, what: str) -> list[str]:
         figures.save(folder / "texture_figure.png", panel, title=f"scene {scene}")
         written.append("texture_figure.png")
     return written
+
+
+SURFACES = ("foreground", "background", "w_foreground")  # FrameResult.surfaces' tile maps
+
+
+def write_surfaces(folder, surfaces, frames=None) -> list[str]:
+    """The two-surface maps of ``surfaces`` (``FrameResult.surfaces``, tensors ``(tiles_y, tiles_x)``) as float32
+    TIFFs, cut by ``frames`` (``stereo_io.Frames``; None: uncut); returns their names."""
+    import tifffile  # noqa: PLC0415
+
+    for name in SURFACES:
+        values = getattr(surfaces, name).detach().cpu().numpy().astype(np.float32)
+        tifffile.imwrite(folder / f"{name}.tif", values if frames is None else frames.crop_tiles(values))
+    return [f"{name}.tif" for name in SURFACES]

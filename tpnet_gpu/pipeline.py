@@ -23,6 +23,7 @@ import torch
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import EngineConfig, TextureConfig
 from tpnet_gpu.disparity.engine import DisparityEngine
+from tpnet_gpu.disparity.two_surface import Surfaces, measure_surfaces
 from tpnet_gpu.net import infer
 from tpnet_gpu.net.layers import NetworkLayers, lags_match
 from tpnet_gpu.processor import TileProcessor
@@ -34,11 +35,13 @@ log = logging.getLogger(__name__)
 class PipelineConfig:
     """``engine``: the disparity engine's settings; ``network_passes``: TPNET passes (when the pipeline has
     weights for its rig), each re-correlating at the previous one's disparity; ``textures``: make the RGBA
-    texture."""
+    texture; ``two_surface``: also fit both surfaces of tiles whose correlation shows two
+    (``FrameResult.surfaces``, tpnet_gpu/disparity/two_surface.py)."""
 
     engine: EngineConfig = EngineConfig()
     network_passes: int = 1
     textures: bool = True
+    two_surface: bool = False
 
     def __post_init__(self):
         if not isinstance(self.network_passes, int) or self.network_passes < 1:
@@ -62,6 +65,8 @@ class FrameResult:
         valid: ``(tiles_y, tiles_x)`` bool: the tile's windows were inside the image and finite.
         texture: ``(channels, H, W)`` R, G, B (or Y), alpha at the final disparity, or None.
         tile_passes: tiles x cameras processed for the disparity, in full-resolution passes.
+        surfaces: with ``PipelineConfig.two_surface``: ``Surfaces`` (foreground, background disparities and
+            their weights, ``(tiles_y, tiles_x)`` each, NaN where the tile shows one surface), else None.
     """
 
     disparity: torch.Tensor
@@ -72,6 +77,7 @@ class FrameResult:
     texture: torch.Tensor | None
     search: torch.Tensor
     tile_passes: float
+    surfaces: Surfaces | None = None
 
 
 class Pipeline:
@@ -173,8 +179,12 @@ class Pipeline:
             texture = tp.result.texture
             texture[:-1] /= self.engine.scale  # colours back in the frames' units (alpha is unitless)
         confidence = torch.where(measured, result.confidence, torch.zeros_like(result.confidence))
-        return FrameResult(disparity, confidence, result.two_depth, initial, tp.result.valid.view(self.grid), texture,
-                           result.search, result.tile_passes)
+        valid, surfaces = tp.result.valid.view(self.grid), None
+        if cfg.two_surface:  # its passes overwrite the engine's processor's views: keep the mask first
+            valid = valid.clone()
+            surfaces = measure_surfaces(self.engine, disparity)
+        return FrameResult(disparity, confidence, result.two_depth, initial, valid, texture, result.search,
+                           result.tile_passes, surfaces)
 
     def stream(self, frames: Iterable) -> Iterator[FrameResult | FrameError]:
         """Process an iterable of frames (e.g. a camera) one by one; each result is valid until the next.

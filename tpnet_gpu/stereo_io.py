@@ -283,10 +283,23 @@ def load_inputs(paths, *, rig=None, cfa: str | None = None, colour: str = "luma"
 
 def make_pipeline(height: int, width: int, *, cfa: str | None, rig: Rig, min_disparity: float = 0.0,
                   max_disparity: float | None = None, weights=None, device: str | None = None,
-                  backend: str | None = None):
+                  backend: str | None = None, two_surface: bool = False):
     """The pipeline for frames of ``height`` x ``width`` from ``rig`` (any camera count; ``max_disparity`` None:
-    the engine's default from the rig; ``weights`` None: the shipped ones for the rig, ``Pipeline``)."""
-    from tpnet_gpu.pipeline import Pipeline  # noqa: PLC0415 - torch, Warp and the model on use
+    the engine's default from the rig; ``weights`` None: the shipped ones for the rig, ``Pipeline``;
+    ``two_surface``: also both surfaces of two-surface tiles)."""
+    from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415 - torch, Warp and the model on use
 
+    extra = {"config": PipelineConfig(two_surface=True)} if two_surface else {}
     return Pipeline(height, width, cfa=cfa, rig=rig, min_disparity=min_disparity, max_disparity=max_disparity,
-                    weights=weights, device=device, backend=backend)
+                    weights=weights, device=device, backend=backend, **extra)
+
+
+def load_frame(path, *, cfa: str | None = None, colour: str = "luma") -> Frames:
+    """One frame of a camera or rig (e.g. of a sequence, ``tpnet flow``): a scene folder (its cameras), a raw
+    file (DNG, ..., or a TIFF mosaic with ``cfa``; one Bayer frame) or an ordinary image (mono by ``colour``)."""
+    path = Path(path)
+    if path.is_dir():
+        return _scene_frames(path)[0]
+    if not path.exists():
+        raise FileNotFoundError(f"path: no such scene folder or file: {path}")
+    return _raw_frames([path], cfa) if _is_raw(path, cfa) else load_images([path], colour=colour, names=[str(path)])

@@ -81,6 +81,17 @@ def two_depth(disparity: torch.Tensor) -> torch.Tensor:
     return torch.isfinite(disparity) & (high - low > TWO_DEPTH_SPREAD)
 
 
+def reference_scale(frames: torch.Tensor) -> torch.Tensor:
+    """The device scalar that scales ``frames`` (any shape, float32) to a mean |value| of ``REFERENCE_LEVEL``
+    (1 for all-zero frames)."""
+    # per-row float32 sums, then their float64 total: a whole-frame float32 mean depends on the torch thread
+    # count (1 ulp of the scale flipped layer values of a data set built with other threads), and a float64
+    # mean costs a frame-sized float64 copy
+    magnitude = torch.nan_to_num(frames, nan=0.0, posinf=0.0, neginf=0.0).abs_()
+    level = (magnitude.sum(dim=-1).double().sum() / magnitude.numel()).float()
+    return torch.where(level > 0, REFERENCE_LEVEL / level, torch.ones_like(level))
+
+
 def correlation_for(cfa: str | None) -> CorrelationConfig:
     """The engine's correlation settings: the baseline's green-only phase correlation, or mono."""
     # mono keeps its sharp default low-pass: on an 8-bit photograph pair at exact shifts, sigma 0.15 / 0.4 / 0.9
@@ -234,12 +245,7 @@ class DisparityEngine:
         # cast a complex frame to real
         out = self.tp.staging if out is None else out
         out.copy_(frames_t)  # converts dtype and device
-        # per-row float32 sums, then their float64 total: a whole-frame float32 mean depends on the torch thread
-        # count (1 ulp of the scale flipped layer values of a data set built with other threads), and a float64
-        # mean costs a frame-sized float64 copy
-        magnitude = torch.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0).abs_()
-        level = (magnitude.sum(dim=-1).double().sum() / magnitude.numel()).float()
-        self.scale = torch.where(level > 0, REFERENCE_LEVEL / level, torch.ones_like(level))
+        self.scale = reference_scale(out)
         return out.mul_(self.scale)
 
     def run(self, frames) -> DisparityResult:

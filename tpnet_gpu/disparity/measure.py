@@ -1,4 +1,5 @@
-"""Per-tile measurement of the residual disparity from pair correlations: one ``Measurer`` for any rig.
+"""Per-tile measurement of the residual disparity from pair correlations: one ``Measurer`` for any rig; and the
+2-D peak of one combined correlation per tile (``Peak2D``: motion vectors, a pair's full 2-D offset).
 
 For the quad's 6 pairs with ``EngineConfig.measure == "lma"`` it is the baseline's measurement (strips -> centre
 of mass -> LMA peak fit, geometry_and_lma.md C.1-C.4; float64 NumPy, so the active tiles' correlations make a
@@ -16,7 +17,8 @@ import torch.nn.functional as F
 from tpnet_gpu import tables
 from tpnet_gpu.baseline.estimate import BaselineParams, measure as lma_measure
 from tpnet_gpu.config import EngineConfig
-from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs
+from tpnet_gpu.disparity.pairs import AxisSampler, WindowOverlap, combine_pairs
+from tpnet_gpu.layout import CORR_RADIUS
 
 PEAK_OFFSETS = 0.25  # px between the offsets the generic peak is read at
 # Tiles read per step after a pass (here and in the engine's sweeps): bounds the temporaries - at 5 MPix a
@@ -63,7 +65,6 @@ class Measurer:
         reach = min(sampler.reach, config.trust + 1.0)
         device = sampler.vectors.device
         self.offsets = torch.arange(-reach, reach + 1e-6, 1.0, device=device)  # whole-pixel search
-        self.window = PEAK_OFFSETS * torch.arange(-4, 5, device=device, dtype=torch.float32)  # +-1 px fine
 
     def measure(self, corr: torch.Tensor, active: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         tiles = corr.shape[0]
@@ -80,27 +81,95 @@ class Measurer:
         return residual, strength
 
     def _peak(self, corr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Whole-pixel peak of the combined correlation (bilinear, cheap), then a parabola through bicubic samples
-        at quarter pixels around it (bilinear samples of a sharp peak pull the parabola toward whole lags)."""
+        """Whole-pixel peak of the combined correlation (bilinear, cheap), then ``axis_peak`` around it."""
         raw = corr
         if self.widen:
             corr = gaussian_blur(corr, WIDEN_SIGMA)
         coarse = torch.nan_to_num(combine_pairs(self.sampler.sample(corr, self.offsets)), nan=-1.0)
         centre = self.offsets[torch.argmax(coarse, dim=1)]  # (T,)
-        fine = centre[:, None] + self.window[None, :]  # (T, 9)
-        combined = torch.nan_to_num(combine_pairs(self.sampler.sample(corr, fine, "bicubic")), nan=-1.0)
-        j = torch.argmax(combined, dim=1, keepdim=True)
-        n = combined.shape[1]
-        c0 = torch.gather(combined, 1, j)
-        cm = torch.gather(combined, 1, (j - 1).clamp(min=0))
-        cp = torch.gather(combined, 1, (j + 1).clamp(max=n - 1))
-        denom = cm - 2 * c0 + cp
-        inner = (j > 0) & (j < n - 1) & (denom < 0)
-        frac = torch.where(inner, 0.5 * (cm - cp) / torch.where(inner, denom, torch.ones_like(denom)),
-                           torch.zeros_like(denom))
-        e = torch.gather(fine, 1, j)[:, 0] + PEAK_OFFSETS * frac[:, 0].clamp(-0.5, 0.5)
-        ok = inner[:, 0]
-        strength = c0[:, 0]
+        e, strength, ok = axis_peak(self.sampler, corr, centre)
         if self.widen:
             strength = combine_pairs(self.sampler.sample(raw, e[:, None].nan_to_num(0.0), "bicubic"))[:, 0]
-        return torch.where(ok, e, torch.full_like(e, float("nan"))), torch.where(ok, strength, torch.zeros_like(e))
+        return e, torch.where(ok, strength, torch.zeros_like(e))
+
+
+def axis_peak(sampler: AxisSampler, corr: torch.Tensor, centre: torch.Tensor):
+    """The combined correlation's peak within +-1 px of ``centre (T,)`` (px along the pairs' axes): bicubic samples
+    at quarter pixels (bilinear samples of a sharp peak pull the parabola toward whole lags), the best one, and a
+    parabola through it and its neighbours. Returns ``(e (T,), value (T,), ok (T,))``; e NaN where the best
+    sample is at the window's end or no parabola vertex is a maximum."""
+    window = PEAK_OFFSETS * torch.arange(-4, 5, device=corr.device, dtype=torch.float32)  # +-1 px fine
+    fine = centre[:, None] + window[None, :]  # (T, 9)
+    combined = torch.nan_to_num(combine_pairs(sampler.sample(corr, fine, "bicubic")), nan=-1.0)
+    j = torch.argmax(combined, dim=1, keepdim=True)
+    n = combined.shape[1]
+    c0 = torch.gather(combined, 1, j)
+    cm = torch.gather(combined, 1, (j - 1).clamp(min=0))
+    cp = torch.gather(combined, 1, (j + 1).clamp(max=n - 1))
+    frac, vertex = parabola_step(cm, c0, cp)
+    ok = ((j > 0) & (j < n - 1) & vertex)[:, 0]
+    e = torch.gather(fine, 1, j)[:, 0] + PEAK_OFFSETS * frac[:, 0]
+    return torch.where(ok, e, torch.full_like(e, float("nan"))), c0[:, 0], ok
+
+
+def parabola_step(cm: torch.Tensor, c0: torch.Tensor, cp: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Vertex offset in (-0.5, 0.5) samples of the parabola through samples (-1, 0, +1), and where it is a maximum."""
+    denom = cm - 2 * c0 + cp
+    ok = denom < 0
+    frac = torch.where(ok, 0.5 * (cm - cp) / torch.where(ok, denom, torch.ones_like(denom)), torch.zeros_like(denom))
+    return frac.clamp(-0.5, 0.5), ok
+
+
+class Peak2D:
+    """``measure(corr (T, 15, 15)) -> (lag (T, 2) x, y px, strength (T,))``: the 2-D peak of one correlation per
+    tile (e.g. pairs combined by ``combine_pairs``), NaN / 0 where none.
+
+    As ``Measurer._peak`` in 2-D: the whole-lag maximum within +-``reach`` of the overlap-normalised correlation
+    (a true shift's peak loses amplitude with the windows' overlap), then bicubic samples at quarter pixels over
+    +-1 px around it, and a parabola through the best sample's neighbours in x and in y. ``widen``: located on
+    the Gaussian-blurred correlation (mono near-delta peaks), the strength read on the unblurred one."""
+
+    def __init__(self, device, *, reach: float = 6.0, widen: bool = False):
+        self.widen = widen
+        self.overlap = WindowOverlap(device)
+        lags = torch.arange(-CORR_RADIUS, CORR_RADIUS + 1, device=device, dtype=torch.float32)
+        ov = self.overlap(lags)
+        self.inside = (lags.abs() <= reach)[:, None] & (lags.abs() <= reach)[None, :]  # (15, 15) searched lags
+        self.coarse_scale = 1.0 / (ov[:, None] * ov[None, :]).clamp(min=0.05)
+        self.lags = lags
+        self.window = PEAK_OFFSETS * torch.arange(-4, 5, device=device, dtype=torch.float32)  # +-1 px fine
+
+    def _sample(self, corr: torch.Tensor, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """Overlap-normalised bicubic samples ``(T, N)`` of ``corr (T, 15, 15)`` at lags ``x, y (T, N)``."""
+        grid = torch.stack([x, y], dim=-1)[:, None] / CORR_RADIUS  # (T, 1, N, 2)
+        values = F.grid_sample(corr[:, None].float(), grid, mode="bicubic", padding_mode="zeros",
+                               align_corners=True)[:, 0, 0]
+        return values / (self.overlap(x) * self.overlap(y)).clamp(min=0.05)
+
+    def measure(self, corr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        tiles = corr.shape[0]
+        raw = torch.nan_to_num(corr.float(), nan=0.0)
+        located = gaussian_blur(raw[:, None], WIDEN_SIGMA)[:, 0] if self.widen else raw
+        coarse = torch.where(self.inside, located * self.coarse_scale, torch.full_like(located, -float("inf")))
+        flat = torch.argmax(coarse.reshape(tiles, -1), dim=1)
+        side = 2 * CORR_RADIUS + 1
+        cy, cx = self.lags[flat // side], self.lags[flat % side]  # (T,)
+        n = len(self.window)
+        fy = (cy[:, None] + self.window[None, :])[:, :, None].expand(-1, n, n).reshape(tiles, -1)
+        fx = (cx[:, None] + self.window[None, :])[:, None, :].expand(-1, n, n).reshape(tiles, -1)
+        fine = self._sample(located, fx, fy).reshape(tiles, n, n)  # (T, y, x)
+        j = torch.argmax(fine.reshape(tiles, -1), dim=1)
+        jy, jx = j // n, j % n
+        rows = torch.arange(tiles, device=corr.device)
+        inner = (jy > 0) & (jy < n - 1) & (jx > 0) & (jx < n - 1)
+        jyc, jxc = jy.clamp(1, n - 2), jx.clamp(1, n - 2)
+        c0 = fine[rows, jyc, jxc]
+        dx, okx = parabola_step(fine[rows, jyc, jxc - 1], c0, fine[rows, jyc, jxc + 1])
+        dy, oky = parabola_step(fine[rows, jyc - 1, jxc], c0, fine[rows, jyc + 1, jxc])
+        x = cx + self.window[jxc] + PEAK_OFFSETS * dx
+        y = cy + self.window[jyc] + PEAK_OFFSETS * dy
+        ok = inner & okx & oky
+        strength = self._sample(raw, x[:, None], y[:, None])[:, 0] if self.widen else c0
+        lag = torch.where(ok[:, None], torch.stack([x, y], dim=-1), torch.full((tiles, 2), float("nan"),
+                                                                                device=corr.device))
+        return lag, torch.where(ok, strength, torch.zeros_like(strength))

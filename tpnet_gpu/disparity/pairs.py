@@ -42,6 +42,22 @@ def window_overlap(shift) -> np.ndarray:
     return np.interp(np.abs(np.asarray(shift, dtype=np.float64)), k, table, right=0.0)
 
 
+class WindowOverlap:
+    """``window_overlap`` on the device: ``overlap(shift)`` for a tensor of shifts (px, any shape), linearly
+    interpolated in a quarter-pixel table."""
+
+    def __init__(self, device):
+        k = np.linspace(0.0, TILE_SIZE, 4 * TILE_SIZE + 1)
+        self._table = torch.as_tensor(window_overlap(k), dtype=torch.float32, device=device)
+
+    def __call__(self, shift: torch.Tensor) -> torch.Tensor:
+        table = self._table
+        pos = (shift.abs() / TILE_SIZE * (len(table) - 1)).clamp(max=len(table) - 1)
+        lo = pos.floor().long().clamp(max=len(table) - 2)
+        frac = pos - lo
+        return table[lo] * (1 - frac) + table[lo + 1] * frac
+
+
 class AxisSampler:
     """Samples pair correlations ``(T, P, 15, 15)`` at disparity offsets ``e`` along each pair's axis (bilinear),
     divided by the windows' overlap at that lag (the peak of a true shift loses amplitude as the windows overlap
@@ -51,14 +67,7 @@ class AxisSampler:
         v = pair_vectors(offsets, pairs)
         self.vectors = torch.as_tensor(v, dtype=torch.float32, device=device)  # (P, 2)
         self.reach = float(CORR_RADIUS / np.abs(v).max())  # |e| the lags of every pair reach
-        k = np.linspace(0.0, TILE_SIZE, 4 * TILE_SIZE + 1)
-        self._ov = torch.as_tensor(window_overlap(k), dtype=torch.float32, device=device)
-
-    def _overlap(self, shift: torch.Tensor) -> torch.Tensor:
-        pos = (shift.abs() / TILE_SIZE * (len(self._ov) - 1)).clamp(max=len(self._ov) - 1)
-        lo = pos.floor().long().clamp(max=len(self._ov) - 2)
-        frac = pos - lo
-        return self._ov[lo] * (1 - frac) + self._ov[lo + 1] * frac
+        self._overlap = WindowOverlap(device)
 
     def sample(self, corr: torch.Tensor, e: torch.Tensor, mode: str = "bilinear") -> torch.Tensor:
         """``(T, P, E)`` overlap-normalised pair correlations at offsets ``e`` ``(T, E)`` or ``(E,)`` (px).

@@ -1,0 +1,45 @@
+"""Per-tile peak measurement (tpnet_gpu/disparity/measure.py): ``Peak2D``. Oracle: synthetic correlations with a
+Gaussian peak at a known 2-D lag, each lag's value scaled by the windows' overlap at that lag (what windowing does
+to the correlation of a shifted tile: the envelope the measurement divides out)."""
+
+import numpy as np
+import pytest
+import torch
+
+from tpnet_gpu.disparity.measure import Peak2D, parabola_step
+from tpnet_gpu.disparity.pairs import window_overlap
+
+
+def _peaks(points, sigma=1.2):
+    lags = np.arange(-7, 8)
+    envelope = window_overlap(lags)[:, None] * window_overlap(lags)[None, :]
+    out = [np.exp(-((lags[None, :] - x) ** 2 + (lags[:, None] - y) ** 2) / (2 * sigma**2)) * envelope
+           for x, y in points]
+    return torch.tensor(np.array(out), dtype=torch.float32)
+
+
+@pytest.mark.parametrize("widen", [False, True])
+def test_peak_2d_finds_known_lags(widen):
+    """The flow's iteration re-centres on the measured peak, so what it needs is a contraction: every lag within
+    0.3 x its length (+ 0.01 px) of the truth - the iteration then converges to the zero lag, where the peak is
+    exact (lag 0 within 1e-3). Measured: 0.016 px at 0.3 px unblurred, 0.06 blurred; 0.2-0.3 px at 4-5 px."""
+    points = np.array([(0.0, 0.0), (0.3, -0.2), (-2.6, 1.45), (4.2, 3.7), (-5.5, -0.5)])
+    lag, strength = Peak2D(torch.device("cpu"), widen=widen).measure(_peaks(points))
+    error = np.linalg.norm(lag.numpy() - points, axis=1)
+    assert np.all(error <= 0.3 * np.linalg.norm(points, axis=1) + 0.01), error
+    assert error[0] < 1e-3
+    assert torch.all(strength > 0.3)
+
+
+def test_peak_2d_keeps_to_its_reach():
+    """A stronger peak beyond ``reach`` is not chosen over a weaker one inside it."""
+    corr = _peaks([(6.5, 0.0)]) + 0.6 * _peaks([(1.0, 1.0)])
+    lag, _ = Peak2D(torch.device("cpu"), reach=4.0).measure(corr)
+    np.testing.assert_allclose(lag.numpy()[0], (1.0, 1.0), atol=0.1)
+
+
+def test_parabola_step_is_the_vertex():
+    x0 = 0.3  # samples of -(x - x0)^2 at -1, 0, 1
+    values = [torch.tensor([-((x - x0) ** 2)]) for x in (-1.0, 0.0, 1.0)]
+    step, ok = parabola_step(*values)
+    assert ok.item() and step.item() == pytest.approx(x0, abs=1e-6)

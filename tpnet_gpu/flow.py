@@ -1,0 +1,250 @@
+"""Motion vectors: per-tile 2-D flow from one frame to the next, measured by the tile processor (issue 17 item 3;
+motion_and_surfaces.md §1).
+
+Frames t and t+1 of the same camera are two "cameras" of one processor, correlated as a pair: frame t's tile sits
+on the tile grid (8 tx + 4, 8 ty + 4) of the camera's own image, frame t+1's at the grid plus the current flow
+estimate, so the pair correlation peaks at the residual flow (README: a content shift (a_x, a_y) of the second
+camera peaks at lag (a_y, a_x)). As the disparity engine's refinement: re-centre each tile by its estimate,
+re-correlate, add the residual (``Peak2D``: the combined correlation's 2-D peak), on the tiles whose step is
+still above ``tolerance``; then tiles more than ``outlier`` px from their neighbours' median flow are measured
+again from that median and keep the stronger answer. Several cameras (a rig's frames at t and t+1) are several
+such pairs, combined per tile (``combine_pairs``: a false peak of one camera is suppressed by the others) into
+the rig's flow, each camera's tile on its own image grid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from tpnet_gpu.disparity.engine import correlation_for, neighbourhood, reference_scale
+from tpnet_gpu.disparity.measure import Peak2D, row_chunks
+from tpnet_gpu.disparity.pairs import combine_pairs
+from tpnet_gpu.layout import CORR_RADIUS
+from tpnet_gpu.processor import TileProcessor
+
+
+OUTLIER_SUPPORT = 5  # measured neighbours (of 8) that make a tile's disagreement with their median an outlier
+
+
+@dataclass(frozen=True)
+class FlowConfig:
+    """Flow settings (px). At most ``iterations`` correlations per tile pass; a tile is done when its step is
+    below ``tolerance``; a measurement counts where its strength >= ``min_strength`` and its residual is within
+    ``reach`` (the first pass finds flows up to ``reach`` from ``init``); ``outlier``: the distance from the 8
+    neighbours' median flow that sends a tile round again from that median. ``search``: tiles without a trusted
+    measurement from ``init`` are tried again from the 8 starts ``reach`` px around it (flows up to 2 ``reach``),
+    keeping the strongest answer."""
+
+    iterations: int = 6
+    tolerance: float = 0.02
+    min_strength: float = 0.1
+    reach: float = 6.0
+    outlier: float = 1.0
+    search: bool = True
+
+    def __post_init__(self):
+        if not isinstance(self.iterations, int) or isinstance(self.iterations, bool) or self.iterations < 1:
+            raise ValueError(f"FlowConfig.iterations: expected an int >= 1, got {self.iterations!r}")
+        for name in ("tolerance", "reach", "outlier"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
+                raise ValueError(f"FlowConfig.{name}: expected a finite number > 0, got {value!r}")
+        if not (isinstance(self.min_strength, (int, float)) and np.isfinite(self.min_strength)
+                and self.min_strength >= 0):
+            raise ValueError(f"FlowConfig.min_strength: expected a finite number >= 0, got {self.min_strength!r}")
+        if self.reach > CORR_RADIUS - 1:
+            raise ValueError(f"FlowConfig.reach: expected at most {CORR_RADIUS - 1} px (the correlation's lags), "
+                             f"got {self.reach!r}")
+
+
+@dataclass(frozen=True)
+class FlowResult:
+    """One frame pair's motion vectors, torch on the estimator's device.
+
+    Attributes:
+        flow: ``(tiles_y, tiles_x, 2)`` (x, y) px: where tile (tx, ty)'s content at (8 tx + 4, 8 ty + 4) of frame
+            t is in frame t+1, minus that centre; NaN where not valid.
+        confidence: ``(tiles_y, tiles_x)`` the final measurement's correlation strength (0 where none).
+        valid: ``(tiles_y, tiles_x)`` bool: a trusted measurement with both windows inside the image.
+        tile_passes: tiles x cameras processed, in full passes of both frames.
+    """
+
+    flow: torch.Tensor
+    confidence: torch.Tensor
+    valid: torch.Tensor
+    tile_passes: float
+
+
+def _frames(name: str, value) -> torch.Tensor:
+    t = value if isinstance(value, torch.Tensor) else torch.as_tensor(np.asarray(value))
+    if t.dim() == 2:
+        t = t[None]
+    if t.dim() != 3 or t.dtype.is_complex or t.dtype == torch.bool:
+        raise ValueError(f"{name}: expected real frames (height, width) or (cams, height, width), "
+                         f"got {t.dtype} of shape {tuple(t.shape)}")
+    return t
+
+
+class FlowEstimator:
+    """Flow of frames ``(cams, height, width)`` (or ``(height, width)``) of ``cams`` cameras (module docstring).
+
+    Args:
+        cfa: Bayer pattern of raw frames, or None (mono images).
+        config: flow settings.
+        device, backend: the tile processor's (``TileProcessor``).
+    """
+
+    def __init__(self, height: int, width: int, *, cams: int = 1, cfa: str | None = "GRBG",
+                 config: FlowConfig = FlowConfig(), device: str | None = None, backend: str | None = None):
+        if isinstance(cams, bool) or not isinstance(cams, int) or cams < 1:
+            raise ValueError(f"cams: expected an int >= 1, got {cams!r}")
+        self.cams, self.config = cams, config
+        # frame t of camera k is processor camera k, frame t+1 is camera cams + k; the offsets only name them
+        # (every centre is given), distinct so that each pair has a direction
+        offsets = [(float(k), 0.0) for k in range(cams)] + [(float(k), 1.0) for k in range(cams)]
+        pairs = tuple((k, cams + k) for k in range(cams))
+        self.tp = TileProcessor(height, width, camera_offsets=offsets, pairs=pairs, cfa=cfa,
+                                config=correlation_for(cfa), device=device, backend=backend)
+        self.device = self.tp.torch_device
+        self.grid = (self.tp.tiles_y, self.tp.tiles_x)
+        self.peak = Peak2D(self.device, reach=config.reach, widen=cfa is None)
+        ty, tx = torch.meshgrid(torch.arange(self.grid[0]), torch.arange(self.grid[1]), indexing="ij")
+        self.centres = torch.stack([8.0 * tx + 4.0, 8.0 * ty + 4.0], dim=-1).reshape(-1, 1, 2).float().to(self.device)
+
+    def load(self, frame_t, frame_t1) -> None:
+        """Stage both frames (scaled together to the engine's reference level) in the processor."""
+        a, b = _frames("frame_t", frame_t), _frames("frame_t1", frame_t1)
+        expected = (self.cams, self.tp.height, self.tp.width)
+        for name, t in (("frame_t", a), ("frame_t1", b)):
+            if tuple(t.shape) != expected:
+                raise ValueError(f"{name}: expected frames of shape {expected} (cams, height, width), "
+                                 f"got {tuple(t.shape)}")
+        staging = self.tp.staging
+        staging[: self.cams].copy_(a)
+        staging[self.cams :].copy_(b)
+        staging.mul_(reference_scale(staging))
+        self.tp.load(staging)
+
+    def _measure(self, flow: torch.Tensor, active: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Residual flow ``(T, 2)`` and strength ``(T,)`` of the loaded frames with frame t+1's tiles at
+        ``flow (T, 2)`` (``active (T,)`` tiles only; NaN / 0 elsewhere)."""
+        moved = self.centres + torch.nan_to_num(flow, nan=0.0)[:, None, :]
+        centres = torch.cat([self.centres.expand(-1, self.cams, -1), moved.expand(-1, self.cams, -1)], dim=1)
+        result = self.tp.measure(centres=centres, active=active)
+        tiles = flow.shape[0]
+        residual = torch.full((tiles, 2), float("nan"), device=self.device)
+        strength = torch.zeros((tiles,), device=self.device)
+        side = 2 * CORR_RADIUS + 1
+        for index, corr in row_chunks(result.corr, torch.nonzero(active & result.valid, as_tuple=True)[0]):
+            combined = combine_pairs(corr.reshape(corr.shape[0], corr.shape[1], -1)).reshape(-1, side, side)
+            residual[index], strength[index] = self.peak.measure(combined)
+        return residual, strength
+
+    def refine(self, start: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, float]:
+        """Iterated re-correlation from ``start (T, 2)`` (NaN rows: not measured): ``(flow, strength, passes)``."""
+        cfg = self.config
+        f = start.clone()
+        active = torch.isfinite(f).all(dim=1)
+        flow = torch.full_like(f, float("nan"))
+        strength = torch.zeros(f.shape[0], device=self.device)
+        passes = 0.0
+        for _ in range(cfg.iterations):
+            if not bool(active.any()):
+                break
+            r, s = self._measure(f, active)
+            passes += float(active.float().mean())
+            step = r.norm(dim=1)
+            good = active & torch.isfinite(step) & (s >= cfg.min_strength) & (step <= cfg.reach)
+            f = torch.where(good[:, None], f + r, f)
+            flow = torch.where(good[:, None], f, flow)
+            strength = torch.where(good, s, strength)
+            active = good & (step >= cfg.tolerance)
+        return flow, strength, passes
+
+    def search(self, start: torch.Tensor, flow: torch.Tensor, strength: torch.Tensor):
+        """The tiles ``refine`` left unmeasured, refined again from each of 8 starts ``reach`` px around
+        ``start (T, 2)``; the strongest answer is kept (``(flow, strength, passes)``)."""
+        passes = 0.0
+        missing = ~torch.isfinite(flow).all(dim=1)
+        step = self.config.reach
+        for dx, dy in ((-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)):
+            if not bool(missing.any()):
+                break
+            offset = torch.tensor([dx * step, dy * step], device=self.device)
+            nan = torch.full_like(start, float("nan"))
+            second, s2, more = self.refine(torch.where(missing[:, None], start + offset, nan))
+            passes += more
+            better = missing & torch.isfinite(second).all(dim=1) & (s2 > strength)
+            flow = torch.where(better[:, None], second, flow)
+            strength = torch.where(better, s2, strength)
+        return flow, strength, passes
+
+    def neighbour_median(self, flow: torch.Tensor, least: int = 1) -> torch.Tensor:
+        """``(T, 2)`` median of each tile's measured 8 neighbours' flow ``(T, 2)``; NaN with fewer than ``least``."""
+        medians = []
+        for c in range(2):
+            windows = neighbourhood(flow[:, c].reshape(self.grid))
+            ring = torch.cat([windows[..., :4], windows[..., 5:]], dim=-1)
+            few = torch.isfinite(ring).sum(dim=-1) < least
+            median = torch.nanmedian(ring, dim=-1).values
+            medians.append(torch.where(few, torch.full_like(median, float("nan")), median).reshape(-1))
+        return torch.stack(medians, dim=-1)
+
+    def consistency(self, flow: torch.Tensor, strength: torch.Tensor):
+        """Tiles more than ``outlier`` px from their 8 neighbours' median flow (or unmeasured, with measured
+        neighbours) are refined again from that median; the new answer is kept where it is stronger."""
+        median = self.neighbour_median(flow)
+        suspect = torch.isfinite(median).all(dim=1) & ~((flow - median).norm(dim=1) <= self.config.outlier)
+        if not bool(suspect.any()):
+            return flow, strength, 0.0
+        second, s2, passes = self.refine(torch.where(suspect[:, None], median, torch.full_like(median, float("nan"))))
+        better = suspect & torch.isfinite(second).all(dim=1) & ~(s2 <= strength)
+        return torch.where(better[:, None], second, flow), torch.where(better, s2, strength), passes
+
+    def estimate(self, frame_t, frame_t1, init=None) -> FlowResult:
+        """Flow from ``frame_t`` to ``frame_t1`` (each ``(cams, height, width)`` or ``(height, width)``, torch or
+        NumPy, any real dtype). ``init``: a first guess, (x, y) px or ``(tiles_y, tiles_x, 2)`` (e.g. the last
+        pair's flow of a sequence; NaN rows start at 0); default 0."""
+        self.load(frame_t, frame_t1)
+        tiles = self.tp.tiles
+        if init is None:
+            start = torch.zeros((tiles, 2), device=self.device)
+        else:
+            start = torch.as_tensor(np.asarray(init, dtype=np.float32) if not isinstance(init, torch.Tensor) else init,
+                                    dtype=torch.float32, device=self.device)
+            if tuple(start.shape) == (2,):
+                start = start.expand(tiles, 2)
+            elif tuple(start.shape) == (*self.grid, 2):
+                start = start.reshape(tiles, 2)
+            else:
+                raise ValueError(f"init: expected (x, y) or shape {(*self.grid, 2)} (tiles_y, tiles_x, 2), "
+                                 f"got shape {tuple(start.shape)}")
+            start = torch.nan_to_num(start, nan=0.0).clone()
+        flow, strength, passes = self.refine(start)
+        if self.config.search:
+            flow, strength, more = self.search(start, flow, strength)
+            passes += more
+        flow, strength, more = self.consistency(flow, strength)
+        # still apart from well-measured neighbours: a false peak, not a motion edge (one tuning scene, seed 7,
+        # 320x240, camera 0: gross 5.1 -> 1.4 % sideways, 9.9 -> 2.8 % forward; coverage 86 -> 82, 85 -> 78 %)
+        median = self.neighbour_median(flow, least=OUTLIER_SUPPORT)
+        isolated = torch.isfinite(median).all(dim=1) & ((flow - median).norm(dim=1) > self.config.outlier)
+        flow = torch.where(isolated[:, None], torch.full_like(flow, float("nan")), flow)
+        strength = torch.where(isolated, torch.zeros_like(strength), strength)
+        valid = torch.isfinite(flow).all(dim=1)
+        return FlowResult(flow.reshape(*self.grid, 2), strength.reshape(self.grid), valid.reshape(self.grid),
+                          passes + more)
+
+
+def estimate_flow(frame_t, frame_t1, *, cfa: str | None = "GRBG", init=None, config: FlowConfig = FlowConfig(),
+                  device: str | None = None, backend: str | None = None) -> FlowResult:
+    """Per-tile motion vectors from ``frame_t`` to ``frame_t1``: ``(height, width)`` frames of one camera, or
+    ``(cams, height, width)`` of a rig's cameras (their flow combined per tile). One-shot: build a
+    ``FlowEstimator`` to measure many pairs of one size."""
+    a = _frames("frame_t", frame_t)
+    estimator = FlowEstimator(a.shape[1], a.shape[2], cams=a.shape[0], cfa=cfa, config=config, device=device,
+                              backend=backend)
+    return estimator.estimate(a, frame_t1, init=init)
