@@ -326,11 +326,6 @@ def build_parser() -> argparse.ArgumentParser:
                          "from the scenes' raw frames every EPOCHS epochs (a second pass converges instead of drifting)")
     tr.set_defaults(func=_cmd_train)
 
-    from tpnet_gpu import cli_calibrate, cli_flow  # noqa: PLC0415 - each subcommand in its own module
-
-    cli_calibrate.add_parser(sub)
-    cli_flow.add_parser(sub)
-
     bench = sub.add_parser("bench", help="run a benchmark of tpnet_gpu.bench (table + JSON)",
                            description="Runs tpnet_gpu.bench.bench_NAME (also `python -m tpnet_gpu.bench.bench_NAME`) "
                                        "with the remaining arguments, e.g. `tpnet bench tp --height 480 --width 640`.")
@@ -339,9 +334,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="arguments for the benchmark (see `tpnet bench NAME --help`)")
     bench.set_defaults(func=_cmd_bench)
 
-    from tpnet_gpu import cli_export, cli_ray  # noqa: PLC0415 - subcommands and options in their own modules
+    from tpnet_gpu import cli_calibrate, cli_export, cli_flow, cli_ray  # noqa: PLC0415 - subcommands and options in
+    # their own modules
 
-    cli_export.add_parser(sub)
+    for module in (cli_calibrate, cli_flow, cli_export):
+        module.add_parser(sub)
     cli_ray.add_options(proc, data)
     return parser
 
