@@ -77,7 +77,6 @@ def _init(text: str | None):
 def run(args: argparse.Namespace) -> int:
     import tifffile  # noqa: PLC0415 - the command's own imports on use (start-up)
 
-    from tpnet_gpu.demo import _upscale  # noqa: PLC0415
     from tpnet_gpu.flow import FlowEstimator  # noqa: PLC0415
     from tpnet_gpu.images import save_png  # noqa: PLC0415
     from tpnet_gpu.outputs import check, output_folder  # noqa: PLC0415
@@ -111,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
             tifffile.imwrite(folder / f"flow{tag}.tif", flow.astype(np.float32), photometric="minisblack")
             tifffile.imwrite(folder / f"confidence{tag}.tif", confidence.astype(np.float32))
             h, w = first.size
-            save_png(folder / f"flow{tag}.png", _upscale(flow_colours(np.moveaxis(flow, 0, -1)))[:h, :w])
+            save_png(folder / f"flow{tag}.png", flow_colours(np.moveaxis(flow, 0, -1)).repeat(8, 0).repeat(8, 1)[:h, :w])
     valid = np.mean([np.isfinite(f[0]).mean() for f, _ in results])
     what = "all cameras combined" if args.camera is None and cams > 1 else f"camera {args.camera or 0}"
     print(f"flow of {len(results)} frame pair{'s' if len(results) > 1 else ''} ({first.size[1]}x{first.size[0]}, "
