@@ -73,7 +73,7 @@ def process_once(scene: Path, out: Path, backend: str, root: Path) -> dict:
     the kernels it added to the caches."""
     before = cache_entries(root)
     command = [sys.executable, "-m", "tpnet_gpu.cli", "process", str(scene), "--out", str(out), "--device", "cpu",
-               *([] if backend == "default" else ["--backend", backend])]
+               "--no-figures", *([] if backend == "default" else ["--backend", backend])]  # start-up, not plots
     wall, cpu, stdout = timed_child(command, cache_env(root))
     reported = _REPORTED.search(stdout)
     if reported is None:

@@ -12,6 +12,7 @@ Loss = sum_n pi_n G_n (clones 5x5, 3x3, 1x1) + 0.1 S (mirror) + 0.5 W (first-lay
 from __future__ import annotations
 
 import json
+import logging
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -22,6 +23,8 @@ from tpnet_gpu.config import TrainConfig  # noqa: F401 - re-exported: the traini
 from tpnet_gpu.net.layers import QUAD_LAGS, lags_match, rig_lags
 from tpnet_gpu.net.losses import main_loss, mirror_loss_frame, weights_loss
 from tpnet_gpu.net.model import TPNet
+
+_log = logging.getLogger(__name__)
 
 PARTIAL_WEIGHTS = (2.0, 0.5, 0.2)
 LR_STEPS = ((0.0, 3e-4), (0.15, 1e-4), (0.3, 3e-5), (0.6, 1e-5), (0.9, 3e-6))  # (fraction of epochs, lr), §7
@@ -145,7 +148,7 @@ def data_lags(manifest: dict) -> tuple:
 
 
 def train(data_folder, out_path, config: TrainConfig = TrainConfig(), *, checkpoint=None, progress: bool = True,
-          log=print, stop_after: int | None = None, device: str = "cpu", rig=None) -> dict:
+          log=_log.info, stop_after: int | None = None, device: str = "cpu", rig=None) -> dict:
     """Train from scratch, or resume from ``checkpoint`` (a path written by this function); writes the final
     weights (state dict + recipe JSON beside it) to ``out_path``. ``stop_after`` ends the run after that
     epoch as an interruption would (the checkpoint then resumes it). ``device``: where the data and the model
@@ -162,9 +165,8 @@ def train(data_folder, out_path, config: TrainConfig = TrainConfig(), *, checkpo
 
 def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: bool, log, stop_after, device,
            rig) -> dict:
-    from tqdm import tqdm  # noqa: PLC0415
-
     from tpnet_gpu import dataset  # noqa: PLC0415
+    from tpnet_gpu.progress import bar as progress_bar  # noqa: PLC0415
 
     torch.manual_seed(config.seed)
     manifest = json.loads((Path(data_folder) / "manifest.json").read_text())
@@ -206,7 +208,7 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
     for _ in range(start_epoch):  # replay the shuffles so a resumed run is identical to an unbroken one
         rng.permutation(n_samples)
     last = config.epochs if stop_after is None else min(stop_after, config.epochs)
-    bar = tqdm(range(start_epoch, last), desc="epochs", disable=not progress)
+    bar = progress_bar(range(start_epoch, last), desc="epochs", unit="epoch", progress=progress)
     for epoch in bar:
         for group in optimiser.param_groups:
             group["lr"] = learning_rate(epoch, config.epochs, config.lr_from)
@@ -227,6 +229,7 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
                   **{f"test_{k}": v for k, v in evaluate(model, test_samples).items()}}
         history.append(record)
         bar.set_postfix(loss=f"{record['loss']:.4f}", rmse=f"{record['test_rmse_network']:.4f}")
+        log(f"epoch {record['epoch']}: loss {record['loss']:.5f}, test RMSE {record['test_rmse_network']:.4f} px")
         if checkpoint is not None:
             checkpoint.parent.mkdir(parents=True, exist_ok=True)
             torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch + 1,

@@ -5,6 +5,7 @@ their call and return known tile maps (the disparity engine of issue 13 is not t
 rules of docs/rig_file.md §8."""
 
 import json
+import shutil
 import signal
 import subprocess
 import sys
@@ -25,11 +26,44 @@ from tpnet_gpu.cli import main
 def test_demo_writes_pictures_and_report(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path), "--width", "160", "--height", "128"]) == 0
     assert "tpnet demo" in capsys.readouterr().out
-    for name in ("disparity.png", "error.png", "texture.png", "correlations.png", "ground_truth.png"):
-        assert (tmp_path / name).stat().st_size > 0
+    for name in ("disparity", "error", "ground_truth", "depth", "confidence", "comparison", "texture_figure",
+                 "texture", "correlations"):
+        with Image.open(tmp_path / f"{name}.png") as image:  # a valid PNG (decoded whole)
+            image.load()
+    with Image.open(tmp_path / "comparison.png") as image:  # 3 panels of 640 px (docs/outputs.md)
+        assert image.size[0] == 3 * 640
     report = json.loads((tmp_path / "report.json").read_text())
     flat = report["stats"]["tpnet"]["flat"]
     assert flat["tiles"] > 0 and flat["median_abs"] < 0.2  # against the rendered ground truth
+    # error.tif is the final disparity minus the rendered ground truth (both written beside it)
+    np.testing.assert_allclose(tifffile.imread(tmp_path / "error.tif"), tifffile.imread(tmp_path / "disparity.tif")
+                               - tifffile.imread(tmp_path / "ground_truth.tif"), atol=1e-6)
+    assert "![comparison](comparison.png)" in (tmp_path / "report.md").read_text()
+
+
+@pytest.mark.slow
+def test_demo_weights_a_trained_file_and_one_for_another_rig(tmp_path, capsys, monkeypatch):
+    # Oracle: a copy of the shipped quad weights is the network the demo reports (by its file name) and reaches
+    # the demo's accuracy; the binocular weights (other layer lags) are refused before anything is rendered.
+    from tpnet_gpu.net import infer
+
+    mine = tmp_path / "mine.pt"
+    shutil.copy(infer.DEFAULT_WEIGHTS, mine)
+    shutil.copy(infer.DEFAULT_WEIGHTS.with_suffix(".json"), mine.with_suffix(".json"))
+    argv = ["demo", "--width", "160", "--height", "128", "--no-figures"]
+    assert main([*argv, "--out", str(tmp_path / "a"), "--weights", str(mine)]) == 0
+    report = json.loads((tmp_path / "a" / "report.json").read_text())
+    assert report["method"] == "TPNET, weights mine.pt" and report["stats"]["tpnet"]["flat"]["median_abs"] < 0.2
+    assert {p.name for p in (tmp_path / "a").glob("*.png")} == {"texture.png", "correlations.png"}  # no figures
+    capsys.readouterr()
+    binocular = infer.WEIGHTS_DIR / "tpnet_binocular_v1.pt"
+
+    def render(*args, **kwargs):
+        raise AssertionError("rendered before the weights were checked")
+
+    monkeypatch.setattr("tpnet_gpu.scenes.render", render)
+    assert main([*argv, "--out", str(tmp_path / "b"), "--weights", str(binocular)]) == 2
+    assert capsys.readouterr().err.startswith("tpnet demo: error: weights:")
 
 
 def test_process_scene_folder_and_bad_inputs(tmp_path, capsys):
@@ -83,8 +117,9 @@ class RecordingEngine:
     def __init__(self, height, width, *, cfa="GRBG", rig=None, min_disparity=0.0, max_disparity=None,
                  weights=None, device=None, backend=None):
         self.shape = (height, width)
+        self.weights = None  # the engine's result: no network (frame_outputs.method)
         self.calls.append(dict(height=height, width=width, cfa=cfa, rig=rig, min_disparity=min_disparity,
-                               max_disparity=max_disparity, device=device, backend=backend))
+                               max_disparity=max_disparity, weights=weights, device=device, backend=backend))
 
     def process(self, frames):
         self.calls[-1]["frames"] = np.array(frames)
@@ -128,7 +163,9 @@ def test_process_pair_through_the_engine_crops_to_the_image(tmp_path, engine, ca
     np.testing.assert_array_equal(tifffile.imread(out / "confidence.tif"), [[0.5, 1.5, 2.5]])
     texture = tifffile.imread(out / "texture.tif")
     np.testing.assert_array_equal(texture, np.arange(4 * 16 * 24, dtype=np.float32).reshape(4, 16, 24)[:, :8, :20])
-    assert Image.open(out / "disparity.png").size == (20, 8) and Image.open(out / "texture.png").size == (20, 8)
+    assert Image.open(out / "texture.png").size == (20, 8)  # the texture's pixels; disparity.png is a figure
+    assert Image.open(out / "disparity.png").size[0] == 640
+    assert tifffile.imread(out / "depth.tif")[0, 0] == np.inf  # disparity 0: at infinity
     assert "stereo pair" in capsys.readouterr().out
 
 
@@ -143,7 +180,7 @@ def test_one_shot_backend_and_threads_follow_the_frame_size(tmp_path, engine):
     small, big = _pair(tmp_path, (240, 320)), _pair(tmp_path / "big", (240, 328))
     for images, backend in ((small, []), (big, []), (small, ["--backend", "taichi"])):
         assert main(["process", *images, "--max-disparity", "4", "--out", str(tmp_path / "o"), "--overwrite",
-                     *backend]) == 0
+                     "--no-figures", *backend]) == 0
     assert [(c["height"] * c["width"], c["backend"]) for c in engine] == [(76800, "warp"), (78720, None),
                                                                           (76800, "taichi")]
     assert [c["torch_threads"] for c in engine] == [1, threads, 1] and torch.get_num_threads() == threads

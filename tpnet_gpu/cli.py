@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import logging
 import math
 import sys
 import time
+from pathlib import Path
 
 # A one-shot run of a frame of at most this many pixels is start-up bound (docs/platform.md §4): the Warp backend
 # starts ~1 CPU-second sooner than Taichi and runs such a frame as fast, and torch's second thread only waits.
@@ -37,7 +39,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     with _one_shot(args.height, args.width, args.backend) as backend:
         report = run_demo(args.out, width=args.width, height=args.height, seed=args.seed, device=args.device,
-                          backend=backend, overwrite=args.overwrite)
+                          backend=backend, weights=args.weights, figures=not args.no_figures, overwrite=args.overwrite)
     print(report["text"])
     return 0
 
@@ -56,11 +58,18 @@ def _disparity(text: str | None, option: str, *, positive: bool) -> float | None
 
 
 def _cmd_process(args: argparse.Namespace) -> int:
-    import numpy as np
-    import tifffile
+    if args.ray or args.address is not None or args.workers is not None:  # scene folders on Ray (cli_ray.py)
+        from tpnet_gpu.cli_ray import process_scenes  # noqa: PLC0415
 
-    from tpnet_gpu.demo import _upscale, texture_rgba
-    from tpnet_gpu.images import colour_ramp, save_png
+        return process_scenes(args)
+    from tpnet_gpu.progress import Steps
+
+    with Steps(4, desc="process", logger=logging.getLogger("tpnet_gpu.cli")) as step:
+        return _process(args, step)
+
+
+def _process(args: argparse.Namespace, step) -> int:
+    from tpnet_gpu import frame_outputs
     from tpnet_gpu.outputs import check, output_folder
     from tpnet_gpu.stereo_io import load_inputs, make_pipeline
 
@@ -69,34 +78,31 @@ def _cmd_process(args: argparse.Namespace) -> int:
     if max_d is not None and min_d >= max_d:
         raise ValueError(f"--min-disparity: expected less than --max-disparity {max_d:g}, got {min_d:g}")
     out = check(args.out, overwrite=args.overwrite, inputs=args.inputs)  # before the work, not after it
+    step("reading the inputs")
     inputs = load_inputs(args.inputs, rig=args.rig, cfa=args.cfa, colour=args.colour, reference=args.reference)
     if inputs.kind in ("pair", "images") and max_d is None:
         raise ValueError("--max-disparity: required for ordinary images (the largest disparity searched, px)")
     frames = inputs.frames
     (height, width), (h, w) = frames.padded, frames.size
+    step("pipeline set-up")
     start = time.perf_counter()
     with _one_shot(height, width, args.backend) as backend:
         pipeline = make_pipeline(height, width, cfa=frames.cfa, rig=inputs.rig, min_disparity=min_d,
-                                 max_disparity=max_d, device=args.device, backend=backend)
+                                 max_disparity=max_d, weights=args.weights, device=args.device, backend=backend)
+        step("frame")
         result = pipeline.process(frames.frames)
     seconds = time.perf_counter() - start
-    disparity = frames.crop_tiles(result.disparity.cpu().numpy())
+    step("outputs" + ("" if args.no_figures else " and figures"))
+    maps = frame_outputs.from_result(result, inputs.rig, frames=frames,
+                                     white=frames.white_level if inputs.kind in ("pair", "images") else None)
+    scene = " ".join(p.name for p in map(Path, args.inputs))
     with output_folder(out, overwrite=args.overwrite, inputs=args.inputs) as folder:
-        tifffile.imwrite(folder / "disparity.tif", disparity.astype(np.float32))
-        tifffile.imwrite(folder / "confidence.tif",
-                         frames.crop_tiles(result.confidence.cpu().numpy()).astype(np.float32))
-        save_png(folder / "disparity.png", _upscale(colour_ramp(disparity, min_d))[:h, :w])
-        written = "disparity.tif/.png, confidence.tif"
-        if result.texture is not None:
-            texture = frames.crop_image(result.texture.cpu().numpy())
-            tifffile.imwrite(folder / "texture.tif", texture.astype(np.float32), photometric="minisblack")  # RGBA
-            written += ", texture.tif"
-            if texture.shape[0] == 4:
-                save_png(folder / "texture.png", texture_rgba(texture, float(np.nanpercentile(texture[:3], 99.5))))
-                written += "/.png"
+        written = frame_outputs.write(folder, maps, scene=scene, what=frame_outputs.method(pipeline),
+                                      figures=not args.no_figures)
+    step.close()  # the bar off the terminal before the report
     what = {"scene": "scene", "raw": f"raw ({frames.cfa})", "pair": "stereo pair", "images": "image"}[inputs.kind]
-    print(f"processed {w}x{h} {what} frame of {frames.cams} cameras in {seconds:.1f} s -> {out}: {written} "
-          f"({disparity.shape[1]}x{disparity.shape[0]} tiles)")
+    print(f"processed {w}x{h} {what} frame of {frames.cams} cameras in {seconds:.1f} s -> {out}: {', '.join(written)} "
+          f"({maps.disparity.shape[1]}x{maps.disparity.shape[0]} tiles; {frame_outputs.method(pipeline)})")
     return 0
 
 
@@ -105,6 +111,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
     from tpnet_gpu.camera import Rig
     from tpnet_gpu.outputs import check, output_folder
+    from tpnet_gpu.progress import Steps
     from tpnet_gpu.scenes import Optics, Sensor, demo_scene, random_scene, render
     from tpnet_gpu.scenes.folder import save
 
@@ -114,8 +121,9 @@ def _cmd_render(args: argparse.Namespace) -> int:
     optics = Optics()
     sensor = Sensor(bits=args.bits)
     start = time.perf_counter()
-    rendered = render(scene, rig, optics=optics, sensor=sensor, supersample=args.supersample, seed=args.seed,
-                      noise=not args.no_noise, progress=lambda m: print(f"rendering {m}", file=sys.stderr))
+    with Steps(rig.cams, desc="render", logger=logging.getLogger("tpnet_gpu.cli")) as step:
+        rendered = render(scene, rig, optics=optics, sensor=sensor, supersample=args.supersample, seed=args.seed,
+                          noise=not args.no_noise, progress=lambda m: step(f"rendering {m}"))
     seconds = time.perf_counter() - start
     with output_folder(out, overwrite=args.overwrite, option="out") as folder:
         save(rendered, folder, name=f"{args.scene}-{args.seed}", optics=optics)
@@ -153,7 +161,9 @@ def _cmd_dataset(args: argparse.Namespace) -> int:
     spec = DatasetSpec(scenes=args.scenes, width=args.width, height=args.height, test_fraction=args.test_fraction,
                        seed=args.seed, supersample=args.supersample, rig=rig)
     start = time.perf_counter()
-    folder = build(args.out, spec, device=args.device)
+    from tpnet_gpu.cli_ray import options  # noqa: PLC0415
+
+    folder = build(args.out, spec, device=args.device, ray=options(args))
     print(f"data set of {spec.scenes} scenes ({spec.width}x{spec.height}) in {time.perf_counter() - start:.0f} s "
           f"-> {folder}")
     return 0
@@ -185,7 +195,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
 BACKEND_HELP = (f"tile-processor kernels (default: warp for frames of at most {SMALL_FRAME_PIXELS} pixels, whose "
                 "start-up dominates; else taichi on the CPU, warp on CUDA)")
 OVERWRITE_HELP = "replace the files of a non-empty output folder (default: refuse it)"
-BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz", "calibration")
+WEIGHTS_HELP = ("TPNET weights from `tpnet train` (default: the shipped ones for the rig); weights trained for another "
+                "rig or other colours are refused")
+NO_FIGURES_HELP = "write no labelled figures (PNG, matplotlib): faster; the TIFFs, points.ply and texture.png stay"
+BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz", "calibration", "ray")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -204,6 +217,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     spec, train = DatasetSpec(), TrainConfig()
     parser = argparse.ArgumentParser(prog="tpnet", description=__doc__)
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="log what the library does: -v INFO, -vv DEBUG (before the subcommand; stderr)")
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="the built-in rendered scene through the pipeline: pictures + report")
     demo.add_argument("--out", default="out/demo", help="output folder")
@@ -212,6 +227,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=int, default=0, help="seed of the scene and the noise")
     demo.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     demo.add_argument("--backend", choices=BACKENDS, default=None, help=BACKEND_HELP)
+    demo.add_argument("--weights", default=None, metavar="FILE", help=WEIGHTS_HELP)
+    demo.add_argument("--no-figures", action="store_true", help=NO_FIGURES_HELP)
     demo.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     demo.set_defaults(func=_cmd_demo)
 
@@ -220,7 +237,8 @@ def build_parser() -> argparse.ArgumentParser:
                           description="Inputs: a scene folder; CAM0 CAM1 CAM2 CAM3 raw files (the quad); LEFT RIGHT "
                                       "ordinary images (a rectified stereo pair, PNG/TIFF; needs --max-disparity); or, "
                                       "with --rig, one raw file or image per camera of the rig. Outputs are cropped "
-                                      "to the inputs' size (tiles: ceil(size / 8)). See docs/rig_file.md.")
+                                      "to the inputs' size (tiles: ceil(size / 8)). See docs/rig_file.md; the "
+                                      "output files (depth, points.ply, figures): docs/outputs.md.")
     proc.add_argument("inputs", nargs="+",
                       help="SCENE_DIR | CAM0 CAM1 CAM2 CAM3 | LEFT RIGHT | one file per rig camera")
     proc.add_argument("--rig", default=None, metavar="FILE",
@@ -239,6 +257,8 @@ def build_parser() -> argparse.ArgumentParser:
                       "rig are read as ordinary images")
     proc.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     proc.add_argument("--backend", choices=BACKENDS, default=None, help=BACKEND_HELP)
+    proc.add_argument("--weights", default=None, metavar="FILE", help=WEIGHTS_HELP)
+    proc.add_argument("--no-figures", action="store_true", help=NO_FIGURES_HELP)
     proc.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP + "; never an input's folder")
     proc.set_defaults(func=_cmd_process)
 
@@ -309,13 +329,21 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("args", nargs=argparse.REMAINDER,
                        help="arguments for the benchmark (see `tpnet bench NAME --help`)")
     bench.set_defaults(func=_cmd_bench)
+
+    from tpnet_gpu import cli_export, cli_ray  # noqa: PLC0415 - subcommands and options in their own modules
+
+    cli_export.add_parser(sub)
+    cli_ray.add_options(proc, data)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    from tpnet_gpu.progress import verbosity  # noqa: PLC0415
+
     args = build_parser().parse_args(argv)
     try:
-        return args.func(args)
+        with verbosity(args.verbose):
+            return args.func(args)
     except (ValueError, TypeError, FileNotFoundError, OSError) as exc:
         print(f"tpnet {args.command}: error: {exc}", file=sys.stderr)
         return 2

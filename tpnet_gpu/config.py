@@ -194,7 +194,8 @@ class EngineConfig:
     re-correlations of the tiles that still move more than ``tolerance`` px; a measurement counts where its
     strength >= ``min_strength`` and |residual| <= ``trust``. ``measure``: "axis" (the pairs' combined peak, any
     rig, all on the device) or "lma" (the quad's LMA peak fit, float64 on the host); the same flat-tile precision
-    on rendered tuning scenes; rigs other than the quad always use "axis"."""
+    on rendered tuning scenes; rigs other than the quad always use "axis". A refined tile that ends more than
+    ``leash`` px from a first-stage answer whose margin is >= ``leash_margin`` keeps the first stage's answer."""
 
     d_min: float = 0.0
     d_max: float | None = None
@@ -210,15 +211,17 @@ class EngineConfig:
     measure: str = "axis"
     verify_margin: float = 1.0
     verify_strength: float = 0.1
+    leash: float = 1.0
+    leash_margin: float = 0.5
 
     def __post_init__(self):
         if self.measure not in MEASURES:
             raise ValueError(f"EngineConfig.measure: expected one of {MEASURES}, got {self.measure!r}")
-        for name in ("reach", "bin_step", "nearest_m", "tolerance", "trust"):
+        for name in ("reach", "bin_step", "nearest_m", "tolerance", "trust", "leash"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
                 raise ValueError(f"EngineConfig.{name}: expected a finite number > 0, got {value!r}")
-        for name in ("p1", "p2", "min_strength", "verify_margin", "verify_strength"):
+        for name in ("p1", "p2", "min_strength", "verify_margin", "verify_strength", "leash_margin"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0):
                 raise ValueError(f"EngineConfig.{name}: expected a finite number >= 0, got {value!r}")

@@ -18,6 +18,9 @@ made, so training sees what the pipeline feeds the network.
 from __future__ import annotations
 
 import json
+import logging
+import os
+import tempfile
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -27,6 +30,8 @@ import torch
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import DatasetSpec  # noqa: F401 - DatasetSpec re-exported
 from tpnet_gpu.scenes import Sensor, random_scene, render
+
+log = logging.getLogger(__name__)
 
 FORMAT = "tpnet-dataset"
 VERSION = 4  # 4: + the raw frames, the engine's measured mask and the window surfaces (re-measuring at new targets)
@@ -117,26 +122,59 @@ def remeasure(chunk: dict, target: np.ndarray, engine, processor, layers) -> np.
     return _layers(engine, processor, layers, frames, np.asarray(target, dtype=np.float32))
 
 
-def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = None, progress: bool = True) -> Path:
+def chunk_path(folder, index: int) -> Path:
+    """Where scene ``index``'s chunk lives in the data set ``folder``."""
+    return Path(folder) / f"scene_{index:04d}.npz"
+
+
+def write_chunk(folder, index: int, spec: DatasetSpec, engine, processor, layers) -> Path:
+    """Scene ``index``'s chunk (:func:`build_scene`; ``engine``, ``processor``, ``layers``: :func:`measurers`),
+    written whole (a temporary file renamed), unless it is there already (a resumed build). The one writer of
+    chunks: the serial build and the Ray workers (``tpnet_gpu.ray_jobs``) both call it."""
+    path = chunk_path(folder, index)
+    if not path.exists():
+        handle, tmp = tempfile.mkstemp(prefix=f".{path.stem}.tmp-", suffix=".npz", dir=path.parent)  # unique:
+        os.close(handle)  # two workers (two machines on a shared folder) never write one temporary file
+        np.savez_compressed(tmp, **build_scene(index, spec, engine, processor, layers))
+        os.replace(tmp, path)
+    return path
+
+
+def write_manifest(folder, spec: DatasetSpec) -> Path:
+    """``manifest.json`` of a data set whose chunks are all written: format, spec, variants, the layers' lags (the
+    spec rig's direction groups of its default pairs, as :func:`measurers` correlates them) and the chunks."""
+    from tpnet_gpu.disparity.pairs import default_pairs  # noqa: PLC0415
+    from tpnet_gpu.net.layers import rig_lags  # noqa: PLC0415
+
+    offsets = spec_rig(spec).offsets
+    labels = spec.split()
+    chunks = [{"file": chunk_path(folder, i).name, "split": labels[i], "scene": i} for i in range(spec.scenes)]
+    manifest = {"format": FORMAT, "version": VERSION, "spec": asdict(spec), "variants": list(spec.variants()),
+                "lags": [list(lag) for lag in rig_lags(offsets, default_pairs(offsets))], "chunks": chunks}
+    path = Path(folder) / "manifest.json"
+    path.write_text(json.dumps(manifest, indent=1))
+    return path
+
+
+def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = None, progress: bool = True,
+          ray=None) -> Path:
     """Build the data set into ``folder`` (one NPZ per scene + ``manifest.json``); resumes: chunks already
-    present are kept."""
-    from tqdm import tqdm  # noqa: PLC0415
+    present are kept. ``ray``: a ``tpnet_gpu.ray_jobs.RayOptions`` to spread the missing scenes over Ray
+    workers (the same chunks, bit for bit), or None to build them here, one after another."""
+    from tpnet_gpu.progress import bar  # noqa: PLC0415
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    engine, processor, layers = measurers(spec, device)
-    labels = spec.split()
-    chunks = []
-    for index in tqdm(range(spec.scenes), desc="scenes", disable=not progress):
-        path = folder / f"scene_{index:04d}.npz"
-        if not path.exists():
-            tmp = path.with_suffix(".tmp.npz")
-            np.savez_compressed(tmp, **build_scene(index, spec, engine, processor, layers))
-            tmp.replace(path)
-        chunks.append({"file": path.name, "split": labels[index], "scene": index})
-    manifest = {"format": FORMAT, "version": VERSION, "spec": asdict(spec), "variants": list(spec.variants()),
-                "lags": [list(lag) for lag in layers.lags], "chunks": chunks}
-    (folder / "manifest.json").write_text(json.dumps(manifest, indent=1))
+    missing = [i for i in range(spec.scenes) if not chunk_path(folder, i).exists()]
+    if ray is not None:
+        from tpnet_gpu.ray_jobs import build_chunks  # noqa: PLC0415 - the ray extra, on use
+
+        build_chunks(folder, spec, missing, ray, device=device, progress=progress)
+    elif missing:
+        engine, processor, layers = measurers(spec, device)
+        for index in bar(missing, desc="scenes", unit="scene", progress=progress):
+            log.info("scene %d of %d: %s", index + 1, spec.scenes, write_chunk(folder, index, spec, engine, processor, layers))
+    write_manifest(folder, spec)
     return folder
 
 

@@ -1,30 +1,24 @@
-"""``tpnet demo``: the built-in rendered scene through the whole frame pipeline, with pictures and a report.
+"""``tpnet demo``: the built-in rendered scene through the whole frame pipeline, with figures and a report.
 
-Writes into the output folder: ``disparity.png`` (TPNET disparity per tile), ``error.png`` (|error| against the
-rendered ground truth, 0 .. 0.5 px), ``texture.png`` (the RGBA texture), ``correlations.png`` (the 6 pair
-correlations of a few tiles), ``report.json`` / ``report.txt`` (RMSE per tile class, timing).
+Writes into the output folder the frame's files (``tpnet_gpu.frame_outputs``: disparity, confidence, depth,
+points.ply, texture) and, against the rendered ground truth (``tpnet_gpu.demo_report``): ``ground_truth.tif``,
+``error.tif`` (final - ground truth, px), their figures, ``comparison.png`` (the ground truth beside the
+disparities and their errors), ``correlations.png`` (the pair correlations of a few tiles) and the report
+(``report.md`` with the figures, ``report.txt``, ``report.json``: RMSE per tile class, timing). docs/outputs.md.
 """
 
 from __future__ import annotations
 
-import json
+import logging
 import time
 
 import numpy as np
 
-from tpnet_gpu import evaluation, outputs
-from tpnet_gpu.images import colour_ramp, save_png
+from tpnet_gpu import evaluation, frame_outputs, outputs
+from tpnet_gpu.images import save_png
+from tpnet_gpu.progress import Steps
 
-
-def _upscale(tiles: np.ndarray, factor: int = 8) -> np.ndarray:
-    return np.repeat(np.repeat(tiles, factor, axis=0), factor, axis=1)
-
-
-def texture_rgba(texture: np.ndarray, white: float) -> np.ndarray:
-    """``(4, H, W)`` R, G, B (raw units), alpha -> ``(H, W, 4)`` uint8 sRGB-ish (gamma 2.2) with alpha."""
-    rgb = np.clip(texture[:3] / max(white, 1e-9), 0, 1) ** (1 / 2.2)
-    alpha = np.clip(texture[3], 0, 1)
-    return (np.concatenate([rgb, alpha[None]], axis=0).transpose(1, 2, 0) * 255 + 0.5).astype(np.uint8)
+log = logging.getLogger(__name__)
 
 
 def correlation_sheet(corr: np.ndarray, tiles: list[int], zoom: int = 6) -> np.ndarray:
@@ -41,61 +35,58 @@ def correlation_sheet(corr: np.ndarray, tiles: list[int], zoom: int = 6) -> np.n
 
 
 def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int = 0, device: str | None = None,
-             backend: str | None = None, overwrite: bool = False) -> dict:
-    """Render the demo scene, run the pipeline, write the pictures and the report into ``out`` (whole or not at
-    all; a non-empty ``out`` only with ``overwrite``: ``tpnet_gpu.outputs``); returns the report."""
-    from tpnet_gpu.camera import Rig  # noqa: PLC0415 - heavy imports on use
+             backend: str | None = None, weights=None, figures: bool = True, overwrite: bool = False,
+             progress: bool = True) -> dict:
+    """Render the demo scene, run the pipeline (with ``weights``: TPNET weights from ``tpnet train``; default the
+    shipped ones), write the files and the report into ``out`` (whole or not at all; a non-empty ``out`` only
+    with ``overwrite``: ``tpnet_gpu.outputs``); ``figures`` False: no matplotlib figures. Returns the report."""
+    from tpnet_gpu import demo_report  # noqa: PLC0415 - heavy imports on use
+    from tpnet_gpu.camera import Rig
     from tpnet_gpu.pipeline import Pipeline
     from tpnet_gpu.scenes import Sensor, demo_scene, render
 
     out = outputs.check(out, overwrite=overwrite)  # before the work, not after it
     rig = Rig(width=width, height=height)
-    start = time.perf_counter()
-    rendered = render(demo_scene(rig, seed=seed), rig, sensor=Sensor(), seed=seed)
-    t_render = time.perf_counter() - start
-    frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
-    start = time.perf_counter()
-    pipeline = Pipeline(height, width, device=device, backend=backend)
-    t_setup = time.perf_counter() - start
-    pipeline.process(frames)  # first frame compiles / loads the kernels
-    start = time.perf_counter()
-    result = pipeline.process(frames)
-    t_frame = time.perf_counter() - start
-
-    gt = rendered.tile_disparity
-    net = result.disparity.cpu().numpy().astype(np.float64)
-    initial = result.initial.cpu().numpy().astype(np.float64)
-    classes = evaluation.tile_classes(gt, rendered.tile_confidence, rendered.tile_spread)
-    stats = {name: {c: evaluation.error_stats(est, gt, mask) for c, mask in classes.items()}
-             for name, est in (("tpnet", net), ("disparity engine (network input)", initial))}
-    high = float(np.nanpercentile(gt, 99))
-    with outputs.output_folder(out, overwrite=overwrite) as folder:
-        save_png(folder / "disparity.png", _upscale(colour_ramp(net, 0.0, high)))
-        save_png(folder / "ground_truth.png", _upscale(colour_ramp(gt, 0.0, high)))
-        save_png(folder / "error.png", _upscale(colour_ramp(np.abs(net - gt), 0.0, 0.5)))
-        if result.texture is not None:
-            white = rendered.sensor.white_level - rendered.sensor.black_level
-            save_png(folder / "texture.png", texture_rgba(result.texture.cpu().numpy(), white))
-        tiles = [int(np.ravel_multi_index((ty, tx), gt.shape)) for ty, tx in
-                 ((gt.shape[0] // 2, gt.shape[1] // 4), (gt.shape[0] * 3 // 4, gt.shape[1] // 2),
-                  (gt.shape[0] // 3, gt.shape[1] * 3 // 4))]
-        corr = pipeline.network_tp.result.corr.cpu().numpy()
-        save_png(folder / "correlations.png", correlation_sheet(corr, tiles))
-        report = {
-            "scene": f"demo-{seed}", "size": [width, height], "device": str(pipeline.device),
-            "seconds": {"render": t_render, "pipeline_setup": t_setup, "frame": t_frame},
-            "stats": stats,
-            "files": sorted(p.name for p in folder.iterdir() if p.suffix == ".png"),
-        }
-        lines = [f"tpnet demo: {width}x{height} quad frame of the built-in scene on {pipeline.device}",
-                 f"render {t_render:.1f} s, pipeline set-up {t_setup:.1f} s, one frame {t_frame:.2f} s "
-                 f"(disparity engine: {result.tile_passes:.1f} tile passes; network + texture)"]
-        for name, per_class in stats.items():
-            parts = [f"{c} rmse {v['rmse_inliers']:.3f} px (median {v['median_abs']:.3f}, gross {v['gross']:.1%}, "
-                     f"{v['tiles']} tiles)" for c, v in per_class.items() if c in ("flat", "edge")]
-            lines.append(f"  {name}: " + "; ".join(parts))
-        lines.append(f"  wrote {', '.join(report['files'])} and report.json to {out}")
-        (folder / "report.json").write_text(json.dumps(report, indent=1))
-        (folder / "report.txt").write_text("\n".join(lines) + "\n")
-    report["text"] = "\n".join(lines)
+    with Steps(rig.cams + 4, desc="demo", logger=log, progress=progress) as step:
+        step("pipeline set-up")  # first: weights that do not fit are refused before the render
+        start = time.perf_counter()
+        pipeline = Pipeline(height, width, weights=weights, device=device, backend=backend)
+        t_setup = time.perf_counter() - start
+        start = time.perf_counter()
+        rendered = render(demo_scene(rig, seed=seed), rig, sensor=Sensor(), seed=seed,
+                          progress=lambda m: step(f"rendering {m}"))
+        t_render = time.perf_counter() - start
+        frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
+        step("first frame (kernels compile or load)")
+        pipeline.process(frames)
+        step("timed frame")
+        start = time.perf_counter()
+        result = pipeline.process(frames)
+        t_frame = time.perf_counter() - start
+        step("outputs" + (" and figures" if figures else ""))
+        what = frame_outputs.method(pipeline)
+        maps = frame_outputs.from_result(result, rig, white=rendered.sensor.white_level - rendered.sensor.black_level)
+        gt = rendered.tile_disparity
+        initial = result.initial.cpu().numpy().astype(np.float64)
+        classes = evaluation.tile_classes(gt, rendered.tile_confidence, rendered.tile_spread)
+        stats = {name: {c: evaluation.error_stats(est, gt, mask) for c, mask in classes.items()}
+                 for name, est in (("tpnet", maps.disparity.astype(np.float64)),
+                                   ("disparity engine (network input)", initial))}
+        scene = f"demo-{seed}"
+        with outputs.output_folder(out, overwrite=overwrite) as folder:
+            written = frame_outputs.write(folder, maps, scene=scene, what=what, figures=figures)
+            written += demo_report.write_truth(folder, maps, gt, initial, scene=scene, what=what, figures=figures)
+            tiles = [int(np.ravel_multi_index((ty, tx), gt.shape)) for ty, tx in
+                     ((gt.shape[0] // 2, gt.shape[1] // 4), (gt.shape[0] * 3 // 4, gt.shape[1] // 2),
+                      (gt.shape[0] // 3, gt.shape[1] * 3 // 4))]
+            corr = (pipeline.network_tp or pipeline.engine.tp).result.corr.cpu().numpy()
+            save_png(folder / "correlations.png", correlation_sheet(corr, tiles))
+            written.append("correlations.png")
+            report = {
+                "scene": scene, "size": [width, height], "device": str(pipeline.device), "method": what,
+                "weights": None if pipeline.weights is None else str(pipeline.weights),
+                "seconds": {"render": t_render, "pipeline_setup": t_setup, "frame": t_frame},
+                "tile_passes": result.tile_passes, "stats": stats, "files": sorted(written),
+            }
+            report["text"] = demo_report.write_report(folder, report, out=out, figures=figures)
     return report

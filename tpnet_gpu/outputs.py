@@ -7,6 +7,9 @@ aside, the new one renamed to ``out``, the old folder's files that the new outpu
 into it, and the old folder is removed. A failure or a kill while writing leaves the old output as it was (a kill
 also leaves a ``.NAME.tmp-*`` folder beside it); a kill between the two renames leaves the old output whole in
 ``.NAME.old-*/folder``.
+
+``output_file(path, overwrite=...)`` does the same for one file: it yields a temporary path beside it to write,
+renamed to ``path`` only when the block ends without an exception.
 """
 
 from __future__ import annotations
@@ -64,3 +67,25 @@ def _put_in_place(staging: Path, out: Path) -> None:
         if not (out / entry.name).exists():
             os.replace(entry, out / entry.name)
     shutil.rmtree(old, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def output_file(path, *, overwrite: bool, option: str = "--out") -> Iterator[Path]:
+    """Yield a temporary path beside the file ``path`` to write, renamed to ``path`` when the block ends without an
+    exception (else removed); an existing ``path`` is refused without ``overwrite`` (a ``ValueError`` naming
+    ``option``), before any work."""
+    path = Path(path).resolve()
+    if path.is_dir():
+        raise ValueError(f"{option}: expected a file, got the folder {path}")
+    if path.exists() and not overwrite:
+        raise ValueError(f"{option}: expected a new file (or --overwrite), got {path}, which exists")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, name = tempfile.mkstemp(prefix=f".{path.name}.tmp-", suffix=path.suffix, dir=path.parent)
+    os.close(handle)
+    tmp = Path(name)
+    try:
+        yield tmp
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    os.replace(tmp, path)

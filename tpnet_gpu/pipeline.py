@@ -121,12 +121,17 @@ class Pipeline:
                 backend=backend)
             self.model = infer.load(self.weights, device=self.device)
             self._infer = infer.infer  # an attribute, so the pipeline bench can time the network's share
+        log.info("pipeline %dx%d on %s: %d cameras, disparity %g .. %g px, weights %s", width, height, self.device,
+                 self.engine.rig.cams, engine_config.d_min, self.engine.d_max, self.weights)
 
     def _weights(self, weights, colours: int) -> Path | None:
         """The weights for this rig's layer lags and these frames' colours: ``weights`` if they were trained for
         them (else ValueError), or the shipped ones that were, or None (logged: the engine's result)."""
         lags = [list(v) for v in self.layers.lags]
         if weights is not None:
+            if not Path(weights).is_file():
+                raise FileNotFoundError(f"weights: expected a weights file (from `tpnet train`), got {weights}, "
+                                        "which is not a file")
             if not lags_match(infer.lags(weights), self.layers.lags):
                 raise ValueError(f"weights: {weights} were trained for a rig whose layers have lags "
                                  f"{[list(v) for v in infer.lags(weights)]}; this pipeline's rig has {lags} "

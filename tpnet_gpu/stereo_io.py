@@ -282,10 +282,11 @@ def load_inputs(paths, *, rig=None, cfa: str | None = None, colour: str = "luma"
 
 
 def make_pipeline(height: int, width: int, *, cfa: str | None, rig: Rig, min_disparity: float = 0.0,
-                  max_disparity: float | None = None, device: str | None = None, backend: str | None = None):
+                  max_disparity: float | None = None, weights=None, device: str | None = None,
+                  backend: str | None = None):
     """The pipeline for frames of ``height`` x ``width`` from ``rig`` (any camera count; ``max_disparity`` None:
-    the engine's default from the rig)."""
+    the engine's default from the rig; ``weights`` None: the shipped ones for the rig, ``Pipeline``)."""
     from tpnet_gpu.pipeline import Pipeline  # noqa: PLC0415 - torch, Warp and the model on use
 
     return Pipeline(height, width, cfa=cfa, rig=rig, min_disparity=min_disparity, max_disparity=max_disparity,
-                    device=device, backend=backend)
+                    weights=weights, device=device, backend=backend)

@@ -251,3 +251,18 @@ def test_bench_startup(tmp_path, capsys):
     assert list(entry["backends"]["warp"]) == ["warm"] and len(row["new_kernels"]) == 1
     assert 0 < row["reported_s"]["median"] < row["wall_s"]["median"]
     assert "32x32 warp warm" in out and "[bench_startup]" in err
+
+
+@pytest.mark.slow
+def test_bench_ray(tmp_path, capsys):
+    # Two tiny scenes, serial rows and a 1-worker Ray; every row's outputs must equal the first's (the bench checks).
+    pytest.importorskip("ray", reason="the ray extra is not installed (pip install 'tpnet-gpu[ray]')")
+    from tpnet_gpu.bench import bench_ray
+
+    report, out, err = run_bench(bench_ray, ["--scenes", "2", "--size", "64x48", "--workers", "1"], tmp_path, capsys)
+    assert {"bench", "scenes", "width", "height", "rows", "machine", "ray_start_stop_s", "table"} <= set(report)
+    assert [r["mode"] for r in report["rows"]] == ["serial, a process per scene", "serial, one process",
+                                                   "Ray, 1 worker"]
+    assert all(r["wall_s"]["median"] > 0 and r["speedup"] > 0 for r in report["rows"])
+    assert report["rows"][1]["speedup"] == 1.0  # the peer
+    assert "outputs identical in every row" in out and "[bench_ray]" in err

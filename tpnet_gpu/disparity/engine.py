@@ -249,11 +249,22 @@ class DisparityEngine:
         found, margin, passes = self.search()
         disparity, strength, refine_passes = self.refine(found)
         passes += refine_passes
+        disparity = self.leash(disparity, found, margin)
         disparity, strength, more = self.consistency(disparity, strength)
         passes += more
         flagged = two_depth(disparity)
         confidence = torch.where(flagged, TWO_DEPTH_WEIGHT * strength, strength)
         return DisparityResult(disparity, strength, confidence, flagged, found, margin, passes)
+
+    def leash(self, disparity: torch.Tensor, found: torch.Tensor, margin: torch.Tensor) -> torch.Tensor:
+        """``disparity (ty, tx)`` with the first stage's answer back where refinement strayed more than
+        ``leash`` px from a clear one (margin >= ``leash_margin``). A weak tile's own peak can pull it 1-3 px off
+        an answer its neighbours' aggregation got right (disparity.md §5): on 24 rendered tuning scenes such
+        moves made 226 tiles wrong and 166 right; flat tiles gross 0.92 -> 0.78 %, all tiles (either surface)
+        2.50 -> 2.11 %, flat own-inlier RMSE 0.095 -> 0.094 px."""
+        cfg = self.config
+        strayed = torch.isfinite(disparity) & ((disparity - found).abs() > cfg.leash) & (margin >= cfg.leash_margin)
+        return torch.where(strayed, found, disparity)
 
     def consistency(self, disparity: torch.Tensor, strength: torch.Tensor):
         """Tiles more than 1 px from their 8 neighbours' median (or unmeasured, with measured neighbours) are
