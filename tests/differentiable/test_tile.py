@@ -1,7 +1,8 @@
 """The differentiable tile processor (tpnet_gpu/differentiable/tile.py). Oracles: the float64 NumPy reference
 (tpnet_gpu.reference: forward output, tolerance 1e-10 relative) and central finite differences
-(torch.autograd.gradcheck in float64, atol 1e-6 / rtol 1e-4; the pixels in its fast mode) with respect to pixel values and tile centres.
-Break tried: the phase rotation's sign of the sine term flipped in ``_rotate`` (forward test fails at ~1 relative);
+(torch.autograd.gradcheck in float64, atol 1e-6 / rtol 1e-4; the pixels in its fast mode) with respect to pixel
+values and tile centres.
+Break tried: the phase rotation's sign of a sine term flipped in ``_rotate`` (the forward tests fail);
 the residual ``s`` detached from the centres (gradcheck of the centres fails: analytic 0)."""
 
 from __future__ import annotations
