@@ -193,3 +193,11 @@ def test_issue16_taichi_texture_is_bit_repeatable_with_two_threads(tmp_path):
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "differ 0" in done.stdout
+
+
+def test_issue16_fuzz_pipeline_rig_name_is_refused_naming_rig():
+    # Found by the Pipeline fuzz family: a rig given by name ended in AttributeError ('str' has no 'width').
+    from tpnet_gpu.pipeline import Pipeline
+
+    with pytest.raises(TypeError, match=r"^rig: expected a tpnet_gpu.Rig or None, got str 'quad'"):
+        Pipeline(H, W, rig="quad", device="cpu", backend="warp")
