@@ -201,3 +201,12 @@ def test_issue16_fuzz_pipeline_rig_name_is_refused_naming_rig():
 
     with pytest.raises(TypeError, match=r"^rig: expected a tpnet_gpu.Rig or None, got str 'quad'"):
         Pipeline(H, W, rig="quad", device="cpu", backend="warp")
+
+
+def test_issue16_pipeline_cfa_none_runs_mono_frames(frames):
+    # Before: Pipeline(cfa=None) said "colour_weights: expected 1 values, got 3" (the quad's colour weights).
+    # Oracle: FrameResult's documented shapes for mono frames (texture: Y and alpha).
+    from tpnet_gpu.pipeline import Pipeline
+
+    result = Pipeline(H, W, cfa=None, device="cpu", backend="warp", max_disparity=4.0).process(frames)
+    assert tuple(result.disparity.shape) == (H // 8, W // 8) and tuple(result.texture.shape) == (2, H, W)
