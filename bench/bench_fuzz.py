@@ -135,7 +135,8 @@ def _family(name: str, size: int, seed: int, progress) -> dict:
     counts = {"cases": 0, "tile_tasks": 0, "measured_tiles": 0, "failures": Counter(), "examples": [],
               "statuses": Counter()}
     start = time.perf_counter()
-    folder = Path(tempfile.mkdtemp(prefix="tpnet-fuzz-"))
+    scratch = tempfile.TemporaryDirectory(prefix="tpnet-fuzz-")  # the CLI family's inputs and outputs
+    folder = Path(scratch.name)
 
     def tally(failures, example):
         counts["failures"].update(failures)
@@ -184,6 +185,7 @@ def _family(name: str, size: int, seed: int, progress) -> dict:
             progress()
 
     draw()
+    scratch.cleanup()
     return {**counts, "failures": dict(counts["failures"]), "statuses": dict(counts["statuses"]),
             "seconds": time.perf_counter() - start}
 
