@@ -7,6 +7,7 @@ disparities go straight into the whole-frame form of the network; the result sta
 from __future__ import annotations
 
 import json
+import pickle
 from pathlib import Path
 
 import torch
@@ -26,14 +27,24 @@ def load(path=None, device=None) -> TPNet:
     if not path.exists():
         raise FileNotFoundError(f"{path}: no TPNET weights there (train some with `tpnet train`)")
     model = TPNet(layers=len(lags(path)))
-    model.load_state_dict(torch.load(path, map_location="cpu", weights_only=True))
+    try:
+        model.load_state_dict(torch.load(path, map_location="cpu", weights_only=True))
+    except (pickle.UnpicklingError, RuntimeError, EOFError, KeyError, TypeError, ValueError) as exc:
+        # torch's messages (several paragraphs on weights_only, or a list of missing keys) omit the file
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        raise ValueError(f"weights: {path} is not a file of TPNET weights ({type(exc).__name__}: {first[:200]})") \
+            from exc
     return model.to(device or "cpu").eval()
 
 
 def recipe(path=None) -> dict:
     """The recipe (command, data set, seed, history) recorded beside the weights."""
     path = Path(path) if path is not None else DEFAULT_WEIGHTS
-    return json.loads(path.with_suffix(".json").read_text())
+    try:
+        return json.loads(path.with_suffix(".json").read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"weights: the recipe {path.with_suffix('.json')} beside them is not valid JSON ({exc})") \
+            from None
 
 
 def lags(path=None) -> tuple:

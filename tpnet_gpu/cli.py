@@ -15,6 +15,7 @@ from pathlib import Path
 # A one-shot run of a frame of at most this many pixels is start-up bound (docs/platform.md §4): the Warp backend
 # starts ~1 CPU-second sooner than Taichi and runs such a frame as fast, and torch's second thread only waits.
 SMALL_FRAME_PIXELS = 320 * 240
+RENDER_MIN_SIDE = 24  # the smallest multiple of 8 that rawio.LIBRAW_MIN_SIDE allows in a DNG
 
 
 @contextlib.contextmanager
@@ -119,6 +120,10 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from tpnet_gpu.scenes.folder import save
 
     out = check(args.out, overwrite=args.overwrite, option="out")  # before the work, not after it
+    for option, value in (("--width", args.width), ("--height", args.height)):
+        if value % 8 or value < RENDER_MIN_SIDE:
+            raise ValueError(f"{option}: expected a multiple of 8 that is at least {RENDER_MIN_SIDE} (LibRaw reads "
+                             f"no smaller raw), got {value}")
     rig = Rig(width=args.width, height=args.height)
     scene = demo_scene(rig, seed=args.seed) if args.scene == "demo" else random_scene(rig, np.random.default_rng(args.seed))
     optics = Optics()
@@ -350,7 +355,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with verbosity(args.verbose):
             return args.func(args)
-    except (ValueError, TypeError, FileNotFoundError, OSError) as exc:
+    # the library refuses bad input with ValueError (RawFormatError is one) and files with OSError; a TypeError
+    # here would be a bug of ours (the CLI builds every value it passes), so it keeps its traceback (issue 16)
+    except (ValueError, OSError) as exc:
         print(f"tpnet {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

@@ -14,6 +14,26 @@ MEASURES = ("lma", "axis")  # the disparity engine's per-tile measurements
 NEAR_DRAWS = 2  # "near" training targets per scene (ground truth + a small log-uniform offset)
 
 
+def _finite(name: str, value, *, positive: bool) -> float:
+    """``value`` as a float, or a ``ValueError`` naming ``name``: finite and > 0 (``positive``) or >= 0. Written
+    as ``not (x > 0)``, not ``x <= 0``: NaN fails every comparison (issue 16: NaN settings were accepted)."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = float("nan")
+    if isinstance(value, bool) or not (np.isfinite(number) and (number > 0 if positive else number >= 0)):
+        raise ValueError(f"{name}: expected a finite number {'> 0' if positive else '>= 0'}, got {value!r}")
+    return number
+
+
+def _weights(name: str, values) -> tuple[float, ...]:
+    """Colour weights: finite, >= 0, at least one > 0."""
+    out = tuple(_finite(name, v, positive=False) for v in values)
+    if not any(out):
+        raise ValueError(f"{name}: expected at least one weight > 0, got {values!r}")
+    return out
+
+
 def target_variants(near_draws: int = NEAR_DRAWS) -> tuple[str, ...]:
     """Names of the training-target variants: the baseline's, a random +-2 px offset, and the near draws."""
     return ("heuristic", "random") + tuple(f"near{i}" for i in range(near_draws))
@@ -44,13 +64,11 @@ class CorrelationConfig:
         sigma = self.sigma_corr
         if sigma is None:
             sigma = tables.CORR_SIGMA if colours == 3 else tables.CORR_SIGMA_MONO
-        if self.fat_zero < 0 or self.sigma_rb <= 0 or sigma <= 0:
-            raise ValueError(
-                f"fat_zero >= 0 and sigmas > 0 expected, got fat_zero={self.fat_zero}, "
-                f"sigma_rb={self.sigma_rb}, sigma_corr={sigma}"
-            )
-        return CorrelationConfig(tuple(float(w) for w in weights), float(self.fat_zero), float(self.sigma_rb),
-                                 float(sigma), float(self.net_offset))
+        if not np.isfinite(float(self.net_offset)):
+            raise ValueError(f"net_offset: expected a finite number (< 0: the plain mean), got {self.net_offset!r}")
+        return CorrelationConfig(_weights("colour_weights", weights), _finite("fat_zero", self.fat_zero, positive=False),
+                                 _finite("sigma_rb", self.sigma_rb, positive=True),
+                                 _finite("sigma_corr", sigma, positive=True), float(self.net_offset))
 
 
 @dataclass(frozen=True)
@@ -80,13 +98,11 @@ class TextureConfig:
             raise ValueError(
                 f"lpf_sigmas, colour_weights: expected {colours} values each, got {len(sigmas)} and {len(weights)}"
             )
-        if self.diff_sigma <= 0 or self.min_shot <= 0 or min(sigmas) <= 0:
-            raise ValueError(
-                f"diff_sigma, min_shot and lpf_sigmas must be > 0, got {self.diff_sigma}, {self.min_shot}, {sigmas}"
-            )
-        return TextureConfig(tuple(map(float, sigmas)), tuple(map(float, weights)), float(self.diff_sigma),
-                             float(self.min_shot), float(self.scale_shot), bool(self.dust_remove),
-                             float(self.output_gain))
+        positive = {name: _finite(name, getattr(self, name), positive=True)
+                    for name in ("diff_sigma", "min_shot", "scale_shot", "output_gain")}
+        return TextureConfig(lpf_sigmas=tuple(_finite("lpf_sigmas", v, positive=True) for v in sigmas),
+                             colour_weights=_weights("colour_weights", weights), dust_remove=bool(self.dust_remove),
+                             **positive)
 
 
 # The correlation the baseline measures with (our recommended choice, by measurement): green only. The as-coded

@@ -229,10 +229,12 @@ def write_dng(path, data, cfa: str, *, black_level=0, white_level=None, bits: in
     cfa_red_position(cfa)  # validates the name
     black = _site_levels(black_level, "black_level")
     white = top if white_level is None else white_level
+    # white first: black is checked against it (white_level=0 used to be blamed on black_level, issue 16)
+    if isinstance(white, bool) or not isinstance(white, (int, float, np.integer, np.floating)) \
+            or not 0 < white <= top or white != int(white):
+        raise ValueError(f"white_level: expected an integer in (0, {top}] for bits={bits}, got {white!r}")
     if black.min() < 0 or np.any(black != np.round(black)) or black.max() >= white:
         raise ValueError(f"black_level: expected integers in [0, white_level={white}), got {black.tolist()}")
-    if white != int(white) or not 0 < white <= top:
-        raise ValueError(f"white_level: expected an integer in (0, {top}] for bits={bits}, got {white!r}")
     uniform = bool(np.all(black == black[0, 0]))
     black_values = (int(black[0, 0]),) if uniform else tuple(int(v) for v in black.ravel())
 

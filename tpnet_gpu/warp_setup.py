@@ -11,13 +11,26 @@ from pathlib import Path
 import warp as wp
 
 _initialised = False
+# Set (not "0") before the first kernel launch: Warp builds every kernel module in its debug mode (bounds checks
+# on every array access; an out-of-range index stops the process with "Assertion failed"). Read once, in
+# init_warp: Warp resolves the mode when a module is first loaded, so setting wp.config.mode after that (as the
+# issue-16 campaign first tried) leaves the release builds in use. Debug builds have their own cache entries.
+DEBUG_ENV = "TPNET_WARP_DEBUG"
+
+
+def debug() -> bool:
+    """Whether this process builds Warp kernels in debug mode (``DEBUG_ENV``)."""
+    return os.environ.get(DEBUG_ENV, "0") not in ("", "0")
 
 
 def init_warp() -> None:
-    """Initialise Warp once. The kernel cache goes to ``$WARP_CACHE_PATH`` when set (CI keeps it stable)."""
+    """Initialise Warp once. The kernel cache goes to ``$WARP_CACHE_PATH`` when set (CI keeps it stable); with
+    ``$TPNET_WARP_DEBUG`` set, kernels are built in Warp's debug mode (``DEBUG_ENV``)."""
     global _initialised
     if _initialised:
         return
+    if debug():
+        wp.config.mode = "debug"
     wp.config.log_level = wp.LOG_WARNING
     if os.environ.get("WARP_CACHE_PATH"):
         wp.config.kernel_cache_dir = os.environ["WARP_CACHE_PATH"]

@@ -192,9 +192,13 @@ def test_bench_fuzz(tmp_path, capsys):
     # oracles hold (the same ones as tests/fuzz).
     from tpnet_gpu.bench import bench_fuzz
 
-    report, out, err = run_bench(bench_fuzz, ["--examples", "12", "--soak", "101"], tmp_path, capsys)
+    report, out, err = run_bench(bench_fuzz, ["--examples", "12", "--soak", "101", "--pipeline", "2", "--raw", "100",
+                                              "--cli", "2"], tmp_path, capsys)
     assert report["crashed"] is False and report["cases"] == 12
     assert report["tile_tasks_per_backend"] >= 4 * 12 and report["failures"] == {}
+    families = report["families"]
+    assert [families[name]["cases"] for name in ("pipeline", "raw", "cli")] == [2, 100, 2]
+    assert all(family["failures"] == {} for family in families.values())
     soak = report["soak"]  # frames 49 and 99 are bad, the other 99 good (3 distinct frames, each equal to its first)
     assert soak["bad frames given a FrameError"] == 2 and soak["good frames equal to their first"] == 99
     assert report["table"][0] in out

@@ -35,7 +35,7 @@ from tpnet_gpu.config import CorrelationConfig, TextureConfig
 from tpnet_gpu.processor import validate
 from tpnet_gpu.processor.buffers import Buffers, TileResult
 from tpnet_gpu.processor.warp_backend import WarpBackend
-from tpnet_gpu.warp_setup import default_device, init_warp
+from tpnet_gpu.warp_setup import init_warp
 
 
 class TileProcessor:
@@ -58,7 +58,8 @@ class TileProcessor:
         graph: record each step sequence's launches once as a Warp graph (a CUDA graph on the GPU) and replay
             it for every later call; inputs are then always staged into the processor's buffers. Default: on
             CUDA with the Warp backend only (plain launches on the CPU). Warp only.
-        device: Warp device ("cpu", "cuda", "cuda:0"); default cuda when present.
+        device: "cpu", "cuda", "cuda:N" or such a ``torch.device``; default cuda when present (anything else, or
+            CUDA where none is present, is a ``ValueError`` naming ``device``).
         backend: kernel language, "warp" or "taichi" (``kernels/taichi_*.py``: the same math, inputs and
             outputs; on the CPU it spreads the tiles over every core, see ``tpnet_gpu.taichi_setup`` for the
             thread count and the offline cache). Default (None): the faster by measurement (bench_throughput,
@@ -86,7 +87,7 @@ class TileProcessor:
         geo = validate.geometry(height, width, camera_offsets, pairs, cfa)
         validate.backend(backend, graph)
         init_warp()
-        self.device = wp.get_device(device or default_device())
+        self.device = wp.get_device(validate.device(device))
         if backend is None:
             backend = "warp" if (graph or self.device.is_cuda) else "taichi"
         if backend == "taichi" and self.device.is_cuda and self.device.ordinal != 0:

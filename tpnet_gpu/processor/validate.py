@@ -52,20 +52,66 @@ def frame_size(name: str, value) -> int:
 
 
 def camera_offsets(offsets) -> np.ndarray:
-    out = np.asarray(offsets, dtype=np.float32)
+    """``(cams >= 2, 2)`` finite offsets, no two cameras at one place (a pair there has no baseline, and the
+    texture's weights of two cameras that always agree were 0/0: an all-NaN texture, issue 16)."""
+    try:
+        out = np.asarray(offsets, dtype=np.float32)
+    except (TypeError, ValueError) as exc:  # ragged lists, strings: NumPy's message would not name the argument
+        raise ValueError(f"camera_offsets: expected shape (cams >= 2, 2) of numbers, got {offsets!r} ({exc})") from None
     if out.ndim != 2 or out.shape[1] != 2 or out.shape[0] < 2:
         raise ValueError(f"camera_offsets: expected shape (cams >= 2, 2), got {out.shape}")
+    if not np.isfinite(out).all():
+        raise ValueError(f"camera_offsets: expected finite numbers, got {out.tolist()}")
+    for i in range(len(out)):
+        same = np.flatnonzero(np.all(out[i + 1:] == out[i], axis=1))
+        if same.size:
+            raise ValueError(f"camera_offsets: expected a distinct place per camera, got cameras {i} and "
+                             f"{i + 1 + same[0]} both at {out[i].tolist()}")
     return out
+
+
+def _index(value) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
 def pairs(value, cams: int) -> tuple[tuple[int, int], ...]:
-    out = tuple((int(a), int(b)) for a, b in value)
-    if not out:
+    """Camera pairs: a non-empty sequence of (first, second) integer indices (floats are refused, not rounded)."""
+    expected = f"a sequence of (first, second) pairs of distinct integer camera indices in 0..{cams - 1}"
+    try:
+        items = list(value)
+    except TypeError:
+        raise ValueError(f"pairs: expected {expected}, got {value!r}") from None
+    if not items:
         raise ValueError("pairs: expected at least one (first, second) camera pair, got none")
-    for a, b in out:
-        if not (0 <= a < cams and 0 <= b < cams) or a == b:
-            raise ValueError(f"pairs: expected distinct camera indices in 0..{cams - 1}, got {(a, b)}")
-    return out
+    out = []
+    for item in items:
+        pair = tuple(item) if isinstance(item, (tuple, list, np.ndarray)) else (item,)
+        if len(pair) != 2 or not all(_index(v) for v in pair) or pair[0] == pair[1] \
+                or not all(0 <= v < cams for v in pair):
+            raise ValueError(f"pairs: expected {expected}, got {item!r}")
+        out.append((int(pair[0]), int(pair[1])))
+    return tuple(out)
+
+
+def device(value) -> str:
+    """A Warp device name from ``value``: None (cuda when present, else cpu), "cpu", "cuda", "cuda:N" or a
+    ``torch.device`` of those ("cpu:0" is the cpu); anything else, or CUDA where none is present, is refused."""
+    import warp as wp  # noqa: PLC0415 - initialised by the caller
+
+    from tpnet_gpu.warp_setup import default_device  # noqa: PLC0415
+
+    if value is None:
+        return default_device()
+    text = str(value) if isinstance(value, (str, torch.device)) else None
+    if text in ("cpu", "cpu:0"):
+        return "cpu"
+    if text is None or not (text == "cuda" or (text.startswith("cuda:") and text[5:].isdigit())):
+        raise ValueError(f"device: expected 'cpu', 'cuda', 'cuda:N' or such a torch.device, got {value!r}")
+    if not wp.is_cuda_available():
+        raise ValueError(f"device: {text!r} asked for, but no CUDA device is present (use 'cpu')")
+    if text != "cuda" and int(text[5:]) >= wp.get_cuda_device_count():
+        raise ValueError(f"device: expected cuda:0..cuda:{wp.get_cuda_device_count() - 1}, got {text!r}")
+    return text
 
 
 def geometry(height, width, offsets, pair_list, cfa) -> Geometry:
@@ -104,14 +150,32 @@ def kernels(value, geo: Geometry) -> np.ndarray | None:
     return np.ascontiguousarray(k, dtype=np.float32)
 
 
+def _numpy(name: str, value: np.ndarray) -> np.ndarray:
+    """``value`` in a form torch can wrap: masked values as NaN (a masked array's mask is honoured, issue 16),
+    native byte order and non-negative strides (copies only for those)."""
+    if value.dtype.kind not in "biufc":  # torch.from_numpy's own message would not name the argument
+        raise TypeError(f"{name}: expected numbers, got a numpy array of {value.dtype}")
+    if isinstance(value, np.ma.MaskedArray):
+        floating = value.dtype if value.dtype.kind in "fc" else np.float32
+        value = np.ma.filled(value.astype(floating), np.nan)
+    if not value.dtype.isnative:
+        value = value.astype(value.dtype.newbyteorder("="))
+    if any(stride < 0 for stride in value.strides):
+        value = np.ascontiguousarray(value)
+    return value
+
+
 def _tensor(name: str, value, shape: tuple, axes: str, kinds: str) -> torch.Tensor:
-    """``value`` as a torch tensor of ``shape`` (NumPy arrays are wrapped, not copied)."""
+    """``value`` as a dense torch tensor with data, of ``shape`` (NumPy arrays are wrapped, copied only when
+    ``_numpy`` must)."""
     if isinstance(value, np.ndarray):
-        if value.dtype.kind not in "biufc":  # torch.from_numpy's own message would not name the argument
-            raise TypeError(f"{name}: expected numbers, got a numpy array of {value.dtype}")
-        value = torch.from_numpy(value)
+        value = torch.from_numpy(_numpy(name, value))
     if not isinstance(value, torch.Tensor):
         raise TypeError(f"{name}: expected {kinds}, got {type(value).__name__}")
+    if value.layout != torch.strided:
+        raise TypeError(f"{name}: expected a dense tensor, got layout {value.layout} (call .to_dense())")
+    if value.is_meta:
+        raise TypeError(f"{name}: expected a tensor with data, got one on the meta device")
     if tuple(value.shape) != shape:
         raise ValueError(f"{name}: expected shape {shape} ({axes}), got {tuple(value.shape)}")
     return value

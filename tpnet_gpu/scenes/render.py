@@ -241,8 +241,8 @@ def render(scene: Scene, rig: Rig = Rig(), *, optics: Optics = Optics(), sensor:
            supersample: int = 2, seed: int = 0, noise: bool = True, progress=None) -> Rendered:
     """Render ``scene`` for every camera of ``rig``; deterministic for ``seed``. ``progress``: optional
     callable taking a message (one call per camera)."""
-    if rig.width % 8 or rig.height % 8:
-        raise ValueError(f"rig: expected a sensor size in multiples of 8, got {rig.width}x{rig.height}")
+    if rig.width % 8 or rig.height % 8 or min(rig.width, rig.height) < 16:
+        raise ValueError(f"rig: expected a sensor size in multiples of 8, at least 16x16, got {rig.width}x{rig.height}")
     if supersample < 1:
         raise ValueError(f"supersample: expected >= 1, got {supersample}")
     raws = np.empty((rig.cams, rig.height, rig.width), dtype=np.uint16)
