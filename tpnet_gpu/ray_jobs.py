@@ -156,7 +156,7 @@ def process_scene(folder: str, out: str, options: dict) -> dict:
         with contextlib.redirect_stdout(printed):
             args.func(args)
         error = ""
-    except (ValueError, TypeError, OSError) as exc:  # what the command line reports as bad input
+    except (ValueError, OSError) as exc:  # what the command line reports as bad input (a TypeError is a bug)
         error = str(exc)
     return {"scene": Path(folder).name, "seconds": time.perf_counter() - start,
             "message": printed.getvalue().strip(), "error": error}
