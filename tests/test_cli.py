@@ -27,7 +27,7 @@ def test_demo_writes_pictures_and_report(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path), "--width", "160", "--height", "128"]) == 0
     assert "tpnet demo" in capsys.readouterr().out
     for name in ("disparity", "error", "ground_truth", "depth", "confidence", "comparison", "texture_figure",
-                 "texture", "correlations"):
+                 "texture", "correlations", "correlations_figure"):
         with Image.open(tmp_path / f"{name}.png") as image:  # a valid PNG (decoded whole)
             image.load()
     with Image.open(tmp_path / "comparison.png") as image:  # 3 panels of 640 px (docs/outputs.md)

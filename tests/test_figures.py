@@ -54,3 +54,23 @@ def test_depth_gets_a_log_scale_and_images_no_colour_bar(tmp_path, drawn):
         assert image.size[0] == 2 * figures.WIDTH_IN * figures.DPI
     with pytest.raises(ValueError, match="panels: expected at least one panel"):
         figures.save(tmp_path / "e.png", [], title="t")
+
+
+def test_correlation_grid_draws_each_cell_at_its_lags_with_labels(tmp_path, drawn):
+    """Oracle: a correlation with a single peak at lag (y, x) = (2, -3) px must be drawn at that lag (the image's
+    extent maps whole-pixel lags to cell centres), with the pairs, tiles, lag axes and a unit on the colour bar."""
+    corr = np.zeros((2, 3, 15, 15))
+    corr[1, 2, 7 + 2, 7 - 3] = 1.0
+    figures.save_correlations(tmp_path / "c.png", corr, [(4, 5), (6, 7)], [(0, 1), (2, 3), (0, 2)], title="scene s")
+    (fig,) = drawn
+    grid = fig.axes[:6]
+    assert [ax.get_title() for ax in grid[:3]] == ["cameras 0-1", "cameras 2-3", "cameras 0-2"]
+    assert grid[3].get_ylabel().startswith("tile (6, 7)") and grid[5].get_xlabel() == "lag x (px)"
+    assert fig.axes[-1].get_ylabel() == "correlation (unitless)"
+    image = grid[5].images[0]
+    left, right, bottom, top = image.get_extent()  # imshow's upper origin: array row 0 at ``top``
+    row, col = np.unravel_index(np.argmax(image.get_array()), image.get_array().shape)
+    drawn_at = (left + (col + 0.5) * (right - left) / 15, top + (row + 0.5) * (bottom - top) / 15)
+    assert drawn_at == pytest.approx((-3.0, 2.0))
+    with pytest.raises(ValueError, match="corr: expected shape"):
+        figures.save_correlations(tmp_path / "d.png", corr[:1], [(4, 5), (6, 7)], [(0, 1)] * 3, title="s")

@@ -3,7 +3,7 @@
 Writes into the output folder the frame's files (``tpnet_gpu.frame_outputs``: disparity, confidence, depth,
 points.ply, texture) and, against the rendered ground truth (``tpnet_gpu.demo_report``): ``ground_truth.tif``,
 ``error.tif`` (final - ground truth, px), their figures, ``comparison.png`` (the ground truth beside the
-disparities and their errors), ``correlations.png`` (the pair correlations of a few tiles) and the report
+disparities and their errors), ``correlations.png`` (the pair correlations of a few tiles; ``correlations_figure.png`` labelled) and the report
 (``report.md`` with the figures, ``report.txt``, ``report.json``: RMSE per tile class, timing). docs/outputs.md.
 """
 
@@ -79,9 +79,17 @@ def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int =
             tiles = [int(np.ravel_multi_index((ty, tx), gt.shape)) for ty, tx in
                      ((gt.shape[0] // 2, gt.shape[1] // 4), (gt.shape[0] * 3 // 4, gt.shape[1] // 2),
                       (gt.shape[0] // 3, gt.shape[1] * 3 // 4))]
-            corr = (pipeline.network_tp or pipeline.engine.tp).result.corr.cpu().numpy()
+            tp = pipeline.network_tp or pipeline.engine.tp
+            corr = tp.result.corr.cpu().numpy()
             save_png(folder / "correlations.png", correlation_sheet(corr, tiles))
             written.append("correlations.png")
+            if figures:
+                from tpnet_gpu.figures import save_correlations  # noqa: PLC0415 - matplotlib on use
+
+                save_correlations(folder / "correlations_figure.png", corr[tiles],
+                                  [np.unravel_index(t, gt.shape) for t in tiles], tp.pairs,
+                                  title=f"scene {scene}: pair correlations at the final disparity ({what})")
+                written.append("correlations_figure.png")
             report = {
                 "scene": scene, "size": [width, height], "device": str(pipeline.device), "method": what,
                 "weights": None if pipeline.weights is None else str(pipeline.weights),

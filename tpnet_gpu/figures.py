@@ -140,3 +140,38 @@ def save(path, panels, *, title: str, size=None, columns: int | None = None) -> 
     fig.savefig(path, dpi=DPI, format="png")
     return path
 
+
+
+def save_correlations(path, corr: np.ndarray, tiles: list[tuple[int, int]], pairs, *, title: str) -> Path:
+    """The pair correlations of a few tiles as a labelled grid: ``corr`` ``(len(tiles), pairs, 15, 15)`` (row:
+    tile ``(ty, tx)`` of ``tiles``, column: camera pair of ``pairs``), each drawn over its lags in px (x right,
+    y down) on one shared colour scale with its colour bar (correlation, unitless)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: PLC0415 - on use (slow import)
+    from matplotlib.figure import Figure  # noqa: PLC0415
+
+    corr = np.asarray(corr, dtype=np.float64)
+    if corr.ndim != 4 or corr.shape[:2] != (len(tiles), len(pairs)) or corr.shape[2] != corr.shape[3]:
+        raise ValueError(f"corr: expected shape ({len(tiles)}, {len(pairs)}, n, n), got {corr.shape}")
+    reach = corr.shape[-1] // 2
+    rows, columns = corr.shape[:2]
+    fig = Figure(figsize=(1.6 * columns + 1.2, 1.6 * rows + 0.8), dpi=DPI, layout="constrained")
+    FigureCanvasAgg(fig)
+    fig.suptitle(title, fontsize=11)
+    axes = fig.subplots(rows, columns, squeeze=False)
+    extent = (-reach - 0.5, reach + 0.5, reach + 0.5, -reach - 0.5)  # each cell centred on its whole-pixel lag
+    low, high = float(np.nanmin(corr)), float(np.nanmax(corr))
+    for r, (ty, tx) in enumerate(tiles):
+        for c, (a, b) in enumerate(pairs):
+            ax = axes[r, c]
+            image = ax.imshow(corr[r, c], cmap="magma", vmin=low, vmax=high, extent=extent, interpolation="nearest")
+            ax.tick_params(labelsize=6)
+            if r == 0:
+                ax.set_title(f"cameras {a}-{b}", fontsize=8)
+            if c == 0:
+                ax.set_ylabel(f"tile ({ty}, {tx})\nlag y (px)", fontsize=7)
+            if r == rows - 1:
+                ax.set_xlabel("lag x (px)", fontsize=7)
+    fig.colorbar(image, ax=axes, shrink=0.8).set_label("correlation (unitless)", fontsize=8)
+    path = Path(path)
+    fig.savefig(path, dpi=DPI, format="png")
+    return path
