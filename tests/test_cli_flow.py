@@ -42,14 +42,15 @@ def test_flow_of_two_images(sequence, tmp_path, capsys):
     out = tmp_path / "out"
     assert cli.main(["flow", str(sequence / "f0.png"), str(sequence / "f1.png"), "--out", str(out),
                      "--backend", "warp"]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["confidence.tif", "flow.png", "flow.tif"]
+    assert sorted(p.name for p in out.iterdir()) == ["confidence.tif", "flow.png", "flow.tif", "flow_figure.png"]
     _check(out / "flow.tif")
     assert "1 frame pair" in capsys.readouterr().out
 
 
 def test_flow_of_a_sequence_folder(sequence, tmp_path):
     out = tmp_path / "out"
-    assert cli.main(["flow", str(sequence), "--out", str(out), "--backend", "warp"]) == 0
+    assert cli.main(["flow", str(sequence), "--out", str(out), "--backend", "warp", "--no-figures"]) == 0
+    assert not list(out.glob("*_figure.png"))
     for k in (0, 1):
         _check(out / f"flow_{k:04d}.tif")
         assert (out / f"flow_{k:04d}.png").exists() and (out / f"confidence_{k:04d}.tif").exists()

@@ -4,8 +4,9 @@ Inputs: two frames ``A B``, more frames in order, or one folder holding a sequen
 raw / image files, in name order). A frame is a scene folder (its cameras' flow combined, or ``--camera N``'s), a
 raw file or an ordinary image (``stereo_io.load_frame``). Per consecutive pair k the output folder (written whole
 or not at all, ``tpnet_gpu.outputs``) gets ``flow_k.tif`` (``(2, tiles_y, tiles_x)`` float32: x, y px; NaN where
-not valid), ``confidence_k.tif`` and ``flow_k.png`` (direction as hue, length as brightness); k is ``NNNN`` for a
-sequence and empty for one pair. Each pair starts from the previous pair's flow (a sequence's motion is smooth).
+not valid), ``confidence_k.tif``, ``flow_k.png`` (direction as hue, length as brightness) and, unless
+``--no-figures``, ``flow_k_figure.png`` (the x and y components, labelled, with colour bars in px; docs/outputs.md
+§2); k is ``NNNN`` for a sequence and empty for one pair. Each pair starts from the previous pair's flow (a sequence's motion is smooth).
 """
 
 from __future__ import annotations
@@ -111,12 +112,25 @@ def run(args: argparse.Namespace) -> int:
             tifffile.imwrite(folder / f"confidence{tag}.tif", confidence.astype(np.float32))
             h, w = first.size
             save_png(folder / f"flow{tag}.png", flow_colours(np.moveaxis(flow, 0, -1)).repeat(8, 0).repeat(8, 1)[:h, :w])
+            if not args.no_figures:
+                _figure(folder / f"flow{tag}_figure.png", flow, (h, w), f"{paths[k].name} -> {paths[k + 1].name}")
     valid = np.mean([np.isfinite(f[0]).mean() for f, _ in results])
     what = "all cameras combined" if args.camera is None and cams > 1 else f"camera {args.camera or 0}"
     print(f"flow of {len(results)} frame pair{'s' if len(results) > 1 else ''} ({first.size[1]}x{first.size[0]}, "
           f"{what}) in {seconds:.1f} s -> {out}: flow*.tif/.png, confidence*.tif ({100 * valid:.0f} % of tiles "
           "valid)")
     return 0
+
+
+def _figure(path, flow: np.ndarray, size: tuple[int, int], pair: str) -> None:
+    """``flow (2, tiles_y, tiles_x)`` px as a labelled figure: its x and y components on one symmetric scale."""
+    from tpnet_gpu.figures import Panel, save  # noqa: PLC0415 - matplotlib on use
+
+    finite = np.abs(flow[np.isfinite(flow)])
+    top = max(float(np.percentile(finite, 99)), 1e-3) if finite.size else 1.0
+    panels = [Panel(flow[i], f"motion {axis} (+: {sign})", f"flow {axis}", "px", "coolwarm", -top, top)
+              for i, (axis, sign) in enumerate((("x", "right"), ("y", "down")))]
+    save(path, panels, title=f"tile motion vectors, {pair}", size=size)
 
 
 def add_parser(sub) -> None:
@@ -134,6 +148,7 @@ def add_parser(sub) -> None:
     p.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     p.add_argument("--backend", choices=BACKENDS, default=None, help="tile-processor kernels: warp or taichi")
     p.add_argument("--overwrite", action="store_true", help="replace the files of a non-empty output folder")
+    p.add_argument("--no-figures", action="store_true", help="write no labelled figures (PNG, matplotlib): faster")
     p.set_defaults(func=run)
 
 
