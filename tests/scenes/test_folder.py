@@ -26,7 +26,8 @@ def test_cli_render_and_bad_size(tmp_path, capsys):
     assert "rendered demo scene" in capsys.readouterr().out
     assert load(tmp_path / "s").frames.shape == (4, 48, 64)
     assert main(["render", str(tmp_path / "t"), "--width", "60", "--height", "48"]) == 2
-    assert "rig: expected a sensor size in multiples of 8, got 60x48" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--width: expected a multiple of 8 that is at least 24 (LibRaw reads no smaller raw), got 60" in err
 
 
 def test_cli_inspect_reads_back(tmp_path, capsys):

@@ -88,7 +88,7 @@ def test_textures_and_bad_input():
         assert 0.0 <= texture.min() and texture.max() <= 1.0
     with pytest.raises(ValueError, match="name: expected one of .* got 'lena'"):
         tx.photo_texture("lena")
-    with pytest.raises(ValueError, match="rig: expected a sensor size in multiples of 8, got 100x96"):
+    with pytest.raises(ValueError, match="rig: expected a sensor size in multiples of 8, at least 16x16, got 100x96"):
         render(Scene(), Rig(width=100, height=96))
 
 

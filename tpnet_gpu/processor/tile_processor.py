@@ -95,6 +95,8 @@ class TileProcessor:
         self.geometry = geo
         self.config = config.resolved(geo.colours)
         self.textures = bool(textures)
+        if self.textures:
+            validate.distinct_offsets(geo.offsets)
         self.keeps_clt = bool(clt)  # measure keeps the CLT tiles (split stages)
         self._converted = False  # the CLT tiles are those of the current targets
         self.texture_config = texture_config.resolved(geo.colours)

@@ -52,8 +52,8 @@ def frame_size(name: str, value) -> int:
 
 
 def camera_offsets(offsets) -> np.ndarray:
-    """``(cams >= 2, 2)`` finite offsets, no two cameras at one place (a pair there has no baseline, and the
-    texture's weights of two cameras that always agree were 0/0: an all-NaN texture, issue 16)."""
+    """``(cams >= 2, 2)`` finite offsets (two cameras may share a place: e.g. one camera correlated with itself
+    through other kernels, or at two times; a texture refuses that, ``distinct_offsets``)."""
     try:
         out = np.asarray(offsets, dtype=np.float32)
     except (TypeError, ValueError) as exc:  # ragged lists, strings: NumPy's message would not name the argument
@@ -62,12 +62,17 @@ def camera_offsets(offsets) -> np.ndarray:
         raise ValueError(f"camera_offsets: expected shape (cams >= 2, 2), got {out.shape}")
     if not np.isfinite(out).all():
         raise ValueError(f"camera_offsets: expected finite numbers, got {out.tolist()}")
-    for i in range(len(out)):
-        same = np.flatnonzero(np.all(out[i + 1:] == out[i], axis=1))
-        if same.size:
-            raise ValueError(f"camera_offsets: expected a distinct place per camera, got cameras {i} and "
-                             f"{i + 1 + same[0]} both at {out[i].tolist()}")
     return out
+
+
+def distinct_offsets(offsets: np.ndarray) -> None:
+    """A texture's cameras ``(cams, 2)`` at distinct places: the texture's weights of two cameras that always
+    agree were 0/0, an all-NaN texture (issue 16)."""
+    for i in range(len(offsets)):
+        same = np.flatnonzero(np.all(offsets[i + 1:] == offsets[i], axis=1))
+        if same.size:
+            raise ValueError(f"camera_offsets: expected a distinct place per camera for textures=True, got cameras "
+                             f"{i} and {i + 1 + same[0]} both at {offsets[i].tolist()}")
 
 
 def _index(value) -> bool:
