@@ -51,7 +51,7 @@ def test_second_process_compiles_no_kernel(tmp_path):
     cache = tmp_path / "cache"
     env = {**os.environ, "TPNET_CACHE_DIR": str(cache), "WARP_CACHE_PATH": str(cache / "warp")}
     command = [sys.executable, "-m", "tpnet_gpu.cli", "process", str(tmp_path / "s"), "--out", str(tmp_path / "o"),
-               "--device", "cpu", "--backend", "taichi", "--overwrite"]  # the second run replaces the first's
+               "--device", "cpu", "--backend", "taichi", "--overwrite", "--no-figures"]  # the second replaces the first
     seen = []
     for _ in range(2):
         done = subprocess.run(command, capture_output=True, text=True, timeout=900, env=env)

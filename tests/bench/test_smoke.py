@@ -259,11 +259,11 @@ def test_bench_startup(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_bench_ray(tmp_path, capsys):
-    # Two tiny scenes, serial rows and a 1-worker Ray; every row's outputs must equal the first's (the bench checks).
+    # One tiny scene, serial rows and a 1-worker Ray; every row's outputs must equal the first's (the bench checks).
     pytest.importorskip("ray", reason="the ray extra is not installed (pip install 'tpnet-gpu[ray]')")
     from tpnet_gpu.bench import bench_ray
 
-    report, out, err = run_bench(bench_ray, ["--scenes", "2", "--size", "64x48", "--workers", "1"], tmp_path, capsys)
+    report, out, err = run_bench(bench_ray, ["--scenes", "1", "--size", "64x48", "--workers", "1"], tmp_path, capsys)
     assert {"bench", "scenes", "width", "height", "rows", "machine", "ray_start_stop_s", "table"} <= set(report)
     assert [r["mode"] for r in report["rows"]] == ["serial, a process per scene", "serial, one process",
                                                    "Ray, 1 worker"]
