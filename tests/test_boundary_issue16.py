@@ -213,3 +213,18 @@ def test_issue16_pipeline_cfa_none_runs_mono_frames(frames):
 
     result = Pipeline(H, W, cfa=None, device="cpu", backend="warp", max_disparity=4.0).process(frames)
     assert tuple(result.disparity.shape) == (H // 8, W // 8) and tuple(result.texture.shape) == (2, H, W)
+
+
+def test_issue16_subnormal_frames_are_the_same_on_both_backends_and_never_measured(frames):
+    # Before: Taichi flushed subnormal pixels to zero where Warp might not. Oracle (docs/platform.md §5): both
+    # backends give the same valid mask and all-zero correlations for frames of subnormal float32 values, and
+    # the disparity engine reports no tile measured (NaN), never a number from them.
+    from tpnet_gpu.disparity import DisparityEngine  # noqa: PLC0415
+
+    tiny = (frames * np.float32(2.0**-140)).astype(np.float32)
+    assert np.all(np.abs(tiny[tiny != 0]) < np.finfo(np.float32).tiny)  # every nonzero pixel subnormal
+    results = [TileProcessor(H, W, device="cpu", backend=b).process(tiny, 0.0) for b in ("warp", "taichi")]
+    assert torch.equal(results[0].valid, results[1].valid)
+    assert all(bool((r.corr == 0).all()) for r in results)
+    engine = DisparityEngine(H, W, device="cpu", backend="warp")
+    assert bool(torch.isnan(engine.run(tiny).disparity).all())
