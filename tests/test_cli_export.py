@@ -2,6 +2,8 @@
 refuses to clobber one, and ends bad input with one line (exit 2). Oracles: onnx's own model checker and the
 documented interface (network.md §12); the numbers are checked in tests/net/test_export.py."""
 
+import sys
+
 import pytest
 
 from tpnet_gpu.cli import main
@@ -17,6 +19,18 @@ def test_export_refuses_an_existing_file_and_missing_weights(tmp_path, capsys):
     assert main(["export", str(tmp_path / "new.onnx"), "--weights", str(tmp_path / "none.pt")]) == 2
     assert "no TPNET weights there" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["net.onnx"]
+
+
+@pytest.mark.parametrize("missing", ["onnx", "onnxscript"])
+def test_export_without_the_onnx_extra_is_one_line_naming_it(tmp_path, capsys, monkeypatch, missing):
+    # Oracle: the optional extra's packages made unimportable (None in sys.modules), as on an install without
+    # the extra: one line naming the package and the extra, exit 2, no file written.
+    monkeypatch.setitem(sys.modules, missing, None)
+    assert main(["export", str(tmp_path / "net.onnx")]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"tpnet export: error: ONNX export needs the '{missing}' package: "
+                   "pip install 'tpnet-gpu[onnx]'\n")
+    assert not list(tmp_path.iterdir())
 
 
 @pytest.mark.slow
