@@ -26,7 +26,7 @@ from tpnet_gpu.baseline.estimate import (
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import CorrelationConfig
 from tpnet_gpu.processor import TileProcessor
-from tpnet_gpu.scenes import Optics, Sensor, demo_scene, random_scene, render
+from tpnet_gpu.scenes import Optics, Sensor, render
 
 from . import common, peers
 from . import report as report_tools
@@ -35,8 +35,7 @@ log = common.logger("bench_accuracy")
 
 
 def run_scene(index: int, args, rig: Rig) -> dict:
-    rng = np.random.default_rng([args.seed, index])
-    scene = demo_scene(rig, seed=args.seed) if index == 0 else random_scene(rig, rng)
+    scene = report_tools.bench_scene(rig, args.seed, index)
     start = time.perf_counter()
     rendered = render(scene, rig, optics=Optics(), sensor=Sensor(), supersample=2, seed=args.seed + index)
     log(f"scene {index} ({scene.name}) rendered in {time.perf_counter() - start:.1f} s")

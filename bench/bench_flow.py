@@ -14,7 +14,6 @@ Scored on textured single-object tiles (the renderer's tile confidence > 0.5) in
 
 from __future__ import annotations
 
-import platform
 import sys
 import time
 
@@ -22,9 +21,10 @@ import numpy as np
 import torch
 
 from tpnet_gpu.bench import common
+from tpnet_gpu.bench import report as report_tools
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.flow import FlowEstimator
-from tpnet_gpu.scenes import Sensor, demo_scene, random_scene, render
+from tpnet_gpu.scenes import Sensor, render
 from tpnet_gpu.scenes.motion import RigMotion, moved_scene, tile_flow
 
 log = common.logger("flow")
@@ -72,7 +72,7 @@ def main(argv=None) -> dict:
     seconds = {e: [] for e in estimators}
     for index in range(args.scenes):
         seed = args.seed + index
-        scene = demo_scene(rig, seed=seed) if index == 0 else random_scene(rig, np.random.default_rng([seed, 0]))
+        scene = report_tools.bench_scene(rig, args.seed, index)
         first = render(scene, rig, sensor=Sensor(), supersample=1, seed=seed)
         textured = np.zeros(first.tile_confidence.shape, dtype=bool)  # the border ring's windows are off the image
         textured[1:-1, 1:-1] = first.tile_confidence[1:-1, 1:-1] > TEXTURED
@@ -114,7 +114,7 @@ def main(argv=None) -> dict:
     report = {"bench": "flow", "scenes": args.scenes, "width": args.width, "height": args.height, "seed": args.seed,
               "motions": motions, "stats": stats, "per_scene": {f"{m} | {e}": v for (m, e), v in rows.items()},
               "seconds_per_pair": {k: float(np.median(v)) for k, v in seconds.items()},
-              "machine": platform.platform(), "table": table}
+              "machine": common.machine_info(), "table": table}
     if args.json:
         common.save_json(report, args.json)
     return report

@@ -37,7 +37,7 @@ from tpnet_gpu.disparity import DisparityEngine
 from tpnet_gpu.net import infer
 from tpnet_gpu.net.layers import QUAD_LAGS, NetworkLayers, lags_match, rig_lags
 from tpnet_gpu.processor import TileProcessor
-from tpnet_gpu.scenes import Sensor, demo_scene, random_scene, render
+from tpnet_gpu.scenes import Sensor, render
 
 from . import common
 from . import report as report_tools
@@ -100,8 +100,7 @@ def main(argv=None) -> dict:
                                    config=infer.correlation(weights), device=args.device)
     scenes = []
     for index in range(args.scenes):
-        rng = np.random.default_rng([args.seed, index])
-        scene = demo_scene(rig, seed=args.seed) if index == 0 else random_scene(rig, rng)
+        scene = report_tools.bench_scene(rig, args.seed, index)
         rendered = render(scene, rig, sensor=Sensor(), supersample=2, seed=args.seed + index)
         frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
         shape = rendered.tile_disparity.shape

@@ -12,7 +12,6 @@ reported as two-surface are false alarms.
 
 from __future__ import annotations
 
-import platform
 import sys
 import time
 
@@ -20,11 +19,12 @@ import numpy as np
 import torch
 
 from tpnet_gpu.bench import common
+from tpnet_gpu.bench import report as report_tools
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.disparity import DisparityEngine
 from tpnet_gpu.disparity.two_surface import measure_surfaces
 from tpnet_gpu.evaluation import MIN_SURFACE_SHARE, tile_classes
-from tpnet_gpu.scenes import Sensor, demo_scene, random_scene, render
+from tpnet_gpu.scenes import Sensor, render
 
 log = common.logger("two_surface")
 
@@ -68,8 +68,7 @@ def main(argv=None) -> dict:
     engine = DisparityEngine(rig.height, rig.width, rig=rig, device=args.device, backend=args.backend)
     per_scene, seconds = [], []
     for index in range(args.scenes):  # the scenes of bench_network (same seeds, same renderer settings)
-        rng = np.random.default_rng([args.seed, index])
-        scene = demo_scene(rig, seed=args.seed) if index == 0 else random_scene(rig, rng)
+        scene = report_tools.bench_scene(rig, args.seed, index)
         rendered = render(scene, rig, sensor=Sensor(), supersample=args.supersample, seed=args.seed + index)
         frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
         result = engine.run(frames)
@@ -95,7 +94,7 @@ def main(argv=None) -> dict:
     print("\n".join(table))
     report = {"bench": "two_surface", "scenes": args.scenes, "width": args.width, "height": args.height,
               "seed": args.seed, "tolerance": args.tolerance, "totals": total, "per_scene": per_scene,
-              "fit_seconds": seconds, "machine": platform.platform(), "table": table}
+              "fit_seconds": seconds, "machine": common.machine_info(), "table": table}
     if args.json:
         common.save_json(report, args.json)
     return report

@@ -1,4 +1,5 @@
-"""Shared by the accuracy benches (bench_accuracy, bench_network): their scene options, per-class statistics
+"""Shared by the accuracy benches (bench_accuracy, bench_network, bench_two_surface, bench_flow): their scenes
+(``bench_scene``) and scene options, per-class statistics
 (strict and either-surface gross, own-inlier and reference-tile RMSE, new gross errors, coverage, confidence
 ranking; tpnet_gpu/evaluation.py), per-frame costs, RMSE vs 3x3 spread, table, PNG plot."""
 
@@ -14,6 +15,14 @@ from tpnet_gpu import evaluation
 from .common import save_json
 
 CLASSES = ("flat", "edge", "low_texture", "all")
+
+
+def bench_scene(rig, seed: int, index: int):
+    """Scene ``index`` of the accuracy benches' series ``seed`` (10000+: the held-out scenes): the demo scene
+    first, then random scenes drawn from ``[seed, index]`` - one convention, so every bench scores the same."""
+    from tpnet_gpu.scenes import demo_scene, random_scene  # noqa: PLC0415
+
+    return demo_scene(rig, seed=seed) if index == 0 else random_scene(rig, np.random.default_rng([seed, index]))
 
 
 def scene_arguments(parser, bench: str, *, scenes: int, width: int, height: int, seed: int) -> None:
