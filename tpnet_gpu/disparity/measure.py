@@ -10,6 +10,8 @@ Measured on 4 rendered 640x480 tuning scenes: flat own-inlier RMSE 0.07-0.11 px 
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -93,13 +95,19 @@ class Measurer:
         return e, torch.where(ok, strength, torch.zeros_like(e))
 
 
+@functools.lru_cache(maxsize=None)
+def peak_window(device: torch.device) -> torch.Tensor:
+    """``(9,)`` offsets (px) of the fine samples around a whole-pixel peak: +-1 px in ``PEAK_OFFSETS`` steps (made
+    once per device: the per-frame path allocates no constants)."""
+    return PEAK_OFFSETS * torch.arange(-4, 5, device=device, dtype=torch.float32)
+
+
 def axis_peak(sampler: AxisSampler, corr: torch.Tensor, centre: torch.Tensor):
     """The combined correlation's peak within +-1 px of ``centre (T,)`` (px along the pairs' axes): bicubic samples
     at quarter pixels (bilinear samples of a sharp peak pull the parabola toward whole lags), the best one, and a
     parabola through it and its neighbours. Returns ``(e (T,), value (T,), ok (T,))``; e NaN where the best
     sample is at the window's end or no parabola vertex is a maximum."""
-    window = PEAK_OFFSETS * torch.arange(-4, 5, device=corr.device, dtype=torch.float32)  # +-1 px fine
-    fine = centre[:, None] + window[None, :]  # (T, 9)
+    fine = centre[:, None] + peak_window(corr.device)[None, :]  # (T, 9)
     combined = torch.nan_to_num(combine_pairs(sampler.sample(corr, fine, "bicubic")), nan=-1.0)
     j = torch.argmax(combined, dim=1, keepdim=True)
     n = combined.shape[1]
@@ -137,7 +145,7 @@ class Peak2D:
         self.inside = (lags.abs() <= reach)[:, None] & (lags.abs() <= reach)[None, :]  # (15, 15) searched lags
         self.coarse_scale = 1.0 / (ov[:, None] * ov[None, :]).clamp(min=0.05)
         self.lags = lags
-        self.window = PEAK_OFFSETS * torch.arange(-4, 5, device=device, dtype=torch.float32)  # +-1 px fine
+        self.window = peak_window(torch.device(device))
 
     def _sample(self, corr: torch.Tensor, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         """Overlap-normalised bicubic samples ``(T, N)`` of ``corr (T, 15, 15)`` at lags ``x, y (T, N)``."""
