@@ -219,7 +219,7 @@ class EngineConfig:
     reach: float = 6.0
     bin_step: float = 0.5
     p1: float = 0.08
-    p2: float = 0.45
+    p2: float = 0.35
     refine_passes: int = 4
     tolerance: float = 0.03
     min_strength: float = 0.1

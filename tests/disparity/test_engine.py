@@ -11,7 +11,7 @@ from tests.textures import fourier_shift
 from tpnet_gpu import evaluation
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.disparity import DisparityEngine
-from tpnet_gpu.disparity.engine import two_depth
+from tpnet_gpu.disparity.engine import settle, two_depth
 from tpnet_gpu.scenes import Sensor, demo_scene, render
 
 W, H = 320, 240
@@ -104,6 +104,30 @@ def test_two_depth_flags_tiles_beside_a_depth_step():
     grid[:, 3] = float("nan")
     flags = two_depth(grid)
     assert not flags.any()
+
+
+def test_settle_moves_only_weak_outliers_on_a_surface():
+    """Oracle: hand-computed strength-weighted means. A plane at 5.0 px (strength 0.5) with 0.2 px of stripes;
+    a weak tile (0.1) at 6.5 px takes the mean of the 8 surface tiles around it (it is off the surface band, so
+    its own value does not count); the same tile strong (0.5) keeps 6.5; a weak tile 0.4 px from its surface mean keeps its value
+    (within ``WEAK_OFF``); a weak tile on a 1-tile-wide ridge of 9 px (3 of its 9 neighbourhood tiles) keeps
+    it; unmeasured tiles stay NaN."""
+    grid = torch.full((7, 9), 5.0)
+    grid[:, ::2] += 0.2
+    strength = torch.full((7, 9), 0.5)
+    grid[2, 2], strength[2, 2] = 6.5, 0.1  # weak outlier
+    grid[2, 5], strength[2, 5] = 6.5, 0.5  # strong: its own peak
+    grid[4, 2], strength[4, 2] = grid[4, 2] + 0.3, 0.1  # weak, 0.4 px from its surface: within WEAK_OFF
+    grid[:, 7], strength[5, 7] = 9.0, 0.1  # a ridge one tile wide
+    grid[0, 0] = float("nan")
+    settled = settle(grid, strength)
+    ring = [grid[y, x] for y in (1, 2, 3) for x in (1, 2, 3) if (y, x) != (2, 2)]
+    assert settled[2, 2] == pytest.approx(float(sum(ring)) / 8, abs=1e-6)  # equal strengths: the plain mean
+    assert settled[2, 5] == 6.5 and settled[4, 2] == grid[4, 2] and settled[5, 7] == 9.0
+    assert torch.isnan(settled[0, 0])
+    unchanged = torch.ones(7, 9, dtype=torch.bool)
+    unchanged[2, 2] = unchanged[0, 0] = False
+    assert torch.equal(settled[unchanged], grid[unchanged])
 
 
 def test_two_depth_tiles_are_the_rendered_depth_edges():
