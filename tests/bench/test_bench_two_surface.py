@@ -6,8 +6,8 @@ import json
 from tpnet_gpu import cli
 from tpnet_gpu.bench import bench_two_surface
 
-TOTALS = {"edge_two_surface_tiles", "reported_two", "both", "either_of_two", "single_either", "flat_tiles",
-          "flat_reported_two"}
+TOTALS = {"edge_two_surface_tiles", "reported_two", "both", "either_of_two", "single_either",
+          "single_either_where_two", "flat_tiles", "flat_reported_two"}
 
 
 def test_bench_two_surface_tiny(tmp_path, capsys):
@@ -18,5 +18,7 @@ def test_bench_two_surface_tiny(tmp_path, capsys):
     assert set(report["totals"]) == TOTALS
     assert all(report["totals"][k] == sum(s[k] for s in report["per_scene"]) for k in TOTALS)
     assert report["totals"]["both"] <= report["totals"]["reported_two"] <= report["totals"]["edge_two_surface_tiles"]
+    assert report["totals"]["single_either_where_two"] <= min(report["totals"]["single_either"],
+                                                              report["totals"]["reported_two"])
     assert "both within 0.5 px" in capsys.readouterr().out
     assert "two_surface" in cli.BENCHES

@@ -59,6 +59,25 @@ def test_lags_beyond_the_correlation_are_nan_and_left_out():
     assert torch.isnan(combine_pairs(torch.full((1, 2, 1), float("nan")))).all()
 
 
+def test_sampling_across_the_axis_from_an_origin():
+    """``vectors`` / ``origin`` / ``normalise``: a Gaussian at lag (2, -1) read along (0, 1) from that lag at whole
+    offsets gives its own values (bicubic interpolation is exact on the lag grid): exp(-1 / (2 s^2)), 1, ... raw;
+    divided by the window overlap at each lag when normalised."""
+    sigma, x0, y0 = 1.2, 2.0, -1.0
+    lags = np.arange(-7, 8)
+    g = np.exp(-((lags[None, :] - x0) ** 2 + (lags[:, None] - y0) ** 2) / (2 * sigma**2))
+    corr = torch.tensor(np.broadcast_to(g, (1, 1, 15, 15)).copy(), dtype=torch.float32)
+    sampler = AxisSampler(((-0.5, 0.0), (0.5, 0.0)), ((0, 1),), "cpu")
+    e = torch.tensor([-1.0, 0.0, 1.0])
+    kwargs = {"vectors": torch.tensor([[0.0, 1.0]]), "origin": torch.tensor([[[x0, y0]]])}
+    raw = sampler.sample(corr, e, "bicubic", normalise=False, **kwargs)[0, 0].numpy()
+    expected = np.exp(-np.array([1.0, 0.0, 1.0]) / (2 * sigma**2))  # lags (2, 0), (2, -1), (2, -2)
+    np.testing.assert_allclose(raw, expected, atol=1e-5)
+    normalised = sampler.sample(corr, e, "bicubic", **kwargs)[0, 0].numpy()
+    overlap = window_overlap(2.0) * window_overlap(np.array([0.0, 1.0, 2.0]))
+    np.testing.assert_allclose(normalised, expected / overlap, rtol=1e-4)
+
+
 # --------------------------------------------------------------------------------------- direction groups
 def test_quad_groups_are_the_network_layers():
     """Oracle: network.md §1 - hor = pairs 0, 1; vert = 2, 3; diag-main = 4; diag-other = 5, in that order."""

@@ -69,20 +69,28 @@ class AxisSampler:
         self.reach = float(CORR_RADIUS / np.abs(v).max())  # |e| the lags of every pair reach
         self._overlap = WindowOverlap(device)
 
-    def sample(self, corr: torch.Tensor, e: torch.Tensor, mode: str = "bilinear") -> torch.Tensor:
+    def sample(self, corr: torch.Tensor, e: torch.Tensor, mode: str = "bilinear", *, vectors=None,
+               origin=None, normalise: bool = True) -> torch.Tensor:
         """``(T, P, E)`` overlap-normalised pair correlations at offsets ``e`` ``(T, E)`` or ``(E,)`` (px).
         ``mode`` "bicubic" for sub-pixel peaks (bilinear samples of a sharp peak pull its parabola toward whole
-        lags: +0.19 px median on a rendered plane at 3.3 px, 0.03 bicubic), "bilinear" for cost volumes."""
+        lags: +0.19 px median on a rendered plane at 3.3 px, 0.03 bicubic), "bilinear" for cost volumes.
+        ``vectors (P, 2)``: read along these lags per px instead of the pairs' (e.g. across a pair's axis), from
+        the lags ``origin (T, P, 2)`` instead of 0; ``normalise`` False: the raw correlations (no division by
+        the overlap - it suits a peak at the sampled lag, not another peak's flank there)."""
         tiles, npairs = corr.shape[:2]
-        shared = e.dim() == 1  # the same offsets for every tile: the overlap is one (P, E) table
-        lag = -(e[None, :] if shared else e)[:, None, :, None] * self.vectors[None, :, None, :]  # (T|1, P, E, 2)
+        vectors = self.vectors if vectors is None else vectors
+        e = e[None, :] if e.dim() == 1 else e  # the same offsets for every tile: one (1, P, E) lag table
+        lag = -e[:, None, :, None] * vectors[None, :, None, :]  # (T|1, P, E, 2)
+        if origin is not None:
+            lag = lag + origin[:, :, None, :]
         grid = (lag.expand(tiles, -1, -1, -1) / CORR_RADIUS).reshape(tiles * npairs, 1, -1, 2)
         values = F.grid_sample(corr.reshape(tiles * npairs, 1, 2 * CORR_RADIUS + 1, 2 * CORR_RADIUS + 1).float(),
                                grid, mode=mode, padding_mode="zeros", align_corners=True)
         values = values.reshape(tiles, npairs, -1)
-        overlap = (self._overlap(lag[..., 0]) * self._overlap(lag[..., 1])).clamp(min=0.05)
+        if normalise:
+            values = values / (self._overlap(lag[..., 0]) * self._overlap(lag[..., 1])).clamp(min=0.05)
         inside = (lag.abs() <= CORR_RADIUS + 1e-4).all(dim=-1)
-        return torch.where(inside, values / overlap, torch.full_like(values, float("nan")))
+        return torch.where(inside, values, torch.full_like(values, float("nan")))
 
 
 # Offset of the geometric mean over pairs: small, so a candidate one pair direction disagrees with is suppressed
