@@ -6,10 +6,13 @@ on the tile grid (8 tx + 4, 8 ty + 4) of the camera's own image, frame t+1's at 
 estimate, so the pair correlation peaks at the residual flow (README: a content shift (a_x, a_y) of the second
 camera peaks at lag (a_y, a_x)). As the disparity engine's refinement: re-centre each tile by its estimate,
 re-correlate, add the residual (``Peak2D``: the combined correlation's 2-D peak), on the tiles whose step is
-still above ``tolerance``; then tiles more than ``outlier`` px from their neighbours' median flow are measured
-again from that median and keep the stronger answer. Several cameras (a rig's frames at t and t+1) are several
-such pairs, combined per tile (``combine_pairs``: a false peak of one camera is suppressed by the others) into
-the rig's flow, each camera's tile on its own image grid.
+still above ``tolerance``. Each tile starts twice, from ``init`` and from the flow of 2x2-binned frames scaled
+up (``flow_starts``: near objects move beyond one correlation's reach), keeping the stronger answer; tiles more
+than ``outlier`` px from their neighbours' median flow are measured again from that median; what is still apart
+from its neighbours, or matches elsewhere as well (``Peak2D.rival``), is dropped. Several cameras (a rig's
+frames at t and t+1) are several such pairs, each camera's tiles centred where the disparity engine's maps say
+the virtual camera's tile sees (``flow_align``), combined per tile (``combine_pairs``: a false peak of one
+camera is suppressed by the others) into the rig's flow.
 """
 
 from __future__ import annotations
@@ -19,9 +22,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
-from tpnet_gpu.disparity.engine import correlation_for, neighbourhood, reference_scale
+from tpnet_gpu.camera import Rig
+from tpnet_gpu.disparity.engine import DisparityEngine, correlation_for, neighbourhood, reference_scale
 from tpnet_gpu.disparity.measure import Peak2D, row_chunks
 from tpnet_gpu.disparity.pairs import combine_pairs
+from tpnet_gpu.flow_align import Alignment
 from tpnet_gpu.flow_starts import bin_frames, coarse_size, scaled_start
 from tpnet_gpu.layout import CORR_RADIUS
 from tpnet_gpu.processor import TileProcessor
@@ -104,13 +109,23 @@ class FlowEstimator:
     Args:
         cfa: Bayer pattern of raw frames, or None (mono images).
         config: flow settings.
+        rig: the rig of ``cams`` > 1 cameras (default: the ideal quad of this frame size), whose disparity
+            engine aligns the cameras' tiles (``flow_align``); the flow is then the rig's virtual camera's
+            (camera 0's for a rig ``referenced_to(0)``). None for one camera.
         device, backend: the tile processor's (``TileProcessor``).
     """
 
     def __init__(self, height: int, width: int, *, cams: int = 1, cfa: str | None = "GRBG",
-                 config: FlowConfig = FlowConfig(), device: str | None = None, backend: str | None = None):
+                 config: FlowConfig = FlowConfig(), rig: Rig | None = None, device: str | None = None,
+                 backend: str | None = None):
         if isinstance(cams, bool) or not isinstance(cams, int) or cams < 1:
             raise ValueError(f"cams: expected an int >= 1, got {cams!r}")
+        if cams == 1 and rig is not None:
+            raise ValueError("rig: expected None for one camera (a rig aligns several), got a rig")
+        if cams > 1:
+            rig = rig if rig is not None else Rig(width=width, height=height)
+            if not isinstance(rig, Rig) or rig.cams != cams:
+                raise ValueError(f"rig: expected a Rig of {cams} cameras (cams), got {rig!r}")
         self.cams, self.config = cams, config
         # frame t of camera k is processor camera k, frame t+1 is camera cams + k; the offsets only name them
         # (every centre is given), distinct so that each pair has a direction
@@ -123,6 +138,10 @@ class FlowEstimator:
         self.peak = Peak2D(self.device, reach=config.reach, widen=cfa is None)
         ty, tx = torch.meshgrid(torch.arange(self.grid[0]), torch.arange(self.grid[1]), indexing="ij")
         self.centres = torch.stack([8.0 * tx + 4.0, 8.0 * ty + 4.0], dim=-1).reshape(-1, 1, 2).float().to(self.device)
+        # several cameras: their tiles aligned by the disparity engine's maps of both frames
+        self.engine = None if cams == 1 else DisparityEngine(height, width, rig=rig, cfa=cfa, device=device,
+                                                               backend=backend)
+        self.align = None if cams == 1 else Alignment(rig, self.grid, self.device)
         size = coarse_size(height, width) if config.levels > 0 else None
         # the coarse levels measure the first camera alone: a start, refined with every camera here
         self.coarse = None if size is None else FlowEstimator(
@@ -147,8 +166,10 @@ class FlowEstimator:
         """Residual flow ``(T, 2)`` and strength ``(T,)`` of the loaded frames with frame t+1's tiles at
         ``flow (T, 2)`` (``active (T,)`` tiles only; NaN / 0 elsewhere); with ``rival``, also ``Peak2D.rival``
         of the correlation ``(T,)`` (0 where not measured)."""
-        moved = self.centres + torch.nan_to_num(flow, nan=0.0)[:, None, :]
-        centres = torch.cat([self.centres.expand(-1, self.cams, -1), moved.expand(-1, self.cams, -1)], dim=1)
+        if self.align is not None:
+            centres = self.align.centres(flow)
+        else:
+            centres = torch.cat([self.centres, self.centres + torch.nan_to_num(flow, nan=0.0)[:, None, :]], dim=1)
         result = self.tp.measure(centres=centres, active=active)
         tiles = flow.shape[0]
         residual = torch.full((tiles, 2), float("nan"), device=self.device)
@@ -259,10 +280,20 @@ class FlowEstimator:
             flow, strength = torch.where(better[:, None], f2, flow), torch.where(better, s2, strength)
         return flow, strength, passes
 
-    def estimate(self, frame_t, frame_t1, init=None) -> FlowResult:
+    def estimate(self, frame_t, frame_t1, init=None, disparity=None) -> FlowResult:
         """Flow from ``frame_t`` to ``frame_t1`` (each ``(cams, height, width)`` or ``(height, width)``, torch or
         NumPy, any real dtype). ``init``: a first guess, (x, y) px or ``(tiles_y, tiles_x, 2)`` (e.g. the last
-        pair's flow of a sequence; NaN rows start at 0); default 0."""
+        pair's flow of a sequence; NaN rows start at 0); default 0. ``disparity``: several cameras' disparity
+        maps ``(d_t, d_t1)`` of both frames, each ``(tiles_y, tiles_x)`` (default: the engine's)."""
+        if self.align is not None:
+            maps = disparity if disparity is not None else [self.engine.run(f).disparity for f in (frame_t, frame_t1)]
+            if len(maps) != 2 or any(tuple(np.shape(m)) != self.grid for m in maps):
+                raise ValueError(f"disparity: expected two maps of shape {self.grid} (d_t, d_t1), "
+                                 f"got {[tuple(np.shape(m)) for m in maps]}")
+            self.align.set_maps(*(torch.as_tensor(np.asarray(m, dtype=np.float32)) if not isinstance(m, torch.Tensor)
+                                  else m.float() for m in maps))
+        elif disparity is not None:
+            raise ValueError("disparity: expected None for one camera, got maps")
         self.load(frame_t, frame_t1)
         start = self._start(init)
         a = self.tp.staging[: self.cams]
