@@ -6,7 +6,8 @@ alone and of the four cameras combined is measured and compared with the rendere
 points projected at both times, ``scenes.motion.tile_flow``). The rig is referenced to camera 0, so the
 renderer's per-tile truth (textured, one object) is camera 0's tile grid; the combined flow aligns the cameras
 by the disparity engine's maps of both frames (``flow_align``) and is the virtual camera's, camera 0's: scored
-against camera 0's truth too. Seconds per pair include the engine's two maps for the combined flow.
+against camera 0's truth too. Seconds per pair include the engine's two maps for the combined flow. "one way":
+camera 0 without the backward check (``FlowConfig.backward``), its peer for the check's gain and cost.
 Scored on textured single-object tiles (the renderer's tile confidence > 0.5) inside the border ring: median
 |error|, RMSE of the inliers (|error| <= 1 px), gross (|error| > 1 px) share of the measured ones, coverage
 (measured share).
@@ -23,7 +24,7 @@ import torch
 from tpnet_gpu.bench import common
 from tpnet_gpu.bench import report as report_tools
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.flow import FlowEstimator
+from tpnet_gpu.flow import FlowConfig, FlowEstimator
 from tpnet_gpu.scenes import Sensor, render
 from tpnet_gpu.scenes.motion import RigMotion, moved_scene, tile_flow
 
@@ -67,6 +68,8 @@ def main(argv=None) -> dict:
         parser.error(f"--scenes: at least 1; --motions: of {list(MOTIONS)}, got {args.motions!r}")
     rig = Rig(width=args.width, height=args.height).referenced_to(0)  # scored on camera 0's own tile grid
     estimators = {"camera 0": FlowEstimator(rig.height, rig.width, cams=1, device=args.device, backend=args.backend),
+                  "camera 0, one way": FlowEstimator(rig.height, rig.width, cams=1, config=FlowConfig(backward=False),
+                                                     device=args.device, backend=args.backend),
                   "4 cameras": FlowEstimator(rig.height, rig.width, cams=4, rig=rig, device=args.device,
                                              backend=args.backend)}
     rows = {(m, e): [] for m in motions for e in estimators}

@@ -75,6 +75,31 @@ def test_a_periodic_texture_is_dropped_as_ambiguous():
         assert check(est.estimate(a, b).valid.numpy()[1:-1, 1:-1].mean()), unique
 
 
+def test_backward_disagreement_by_hand(mono):
+    """``disagree``: a flow and the backward flow of the tile where it lands summing to within ``outlier`` (1 px)
+    agree; by hand, on the 12 x 16 grid of 96 x 128 frames: tile 0 moves 8 px right onto tile 1."""
+    tiles = 12 * 16
+    flow = torch.full((tiles, 2), float("nan"))
+    back = torch.full((tiles, 2), float("nan"))
+    flow[0] = torch.tensor([8.0, 0.0])
+    back[1] = torch.tensor([-7.5, 0.3])  # sums to (0.5, 0.3): agrees
+    flow[20] = torch.tensor([0.0, 8.0])  # lands on tile 36
+    back[36] = torch.tensor([2.0, -8.0])  # sums to (2, 0): disagrees
+    flow[50] = torch.tensor([0.2, 0.0])  # lands on itself, whose backward flow is unmeasured: no evidence
+    out = mono.disagree(flow, back)
+    assert not out[0] and out[20] and not out[50] and int(out.sum()) == 1
+
+
+def test_backward_check_keeps_a_clean_shift(texture):
+    """A pure shift is consistent both ways (a physical fact): the check drops no measured tile of it."""
+    moved = _fourier_shift(texture, 1.7, -0.45)[:48, :64].astype(np.float32)
+    still = texture[:48, :64].astype(np.float32)
+    shares = [FlowEstimator(48, 64, cams=1, cfa=None, config=FlowConfig(backward=backward), backend="warp",
+                            device="cpu").estimate(still, moved).valid.numpy()[1:-1, 1:-1].mean()
+              for backward in (False, True)]
+    assert shares[0] > 0.9 and shares[1] == shares[0], shares
+
+
 def test_bad_inputs_are_named():
     with pytest.raises(ValueError, match="frame_t1: expected frames of shape"):
         estimate_flow(np.zeros((48, 64)), np.zeros((48, 72)), cfa=None)
