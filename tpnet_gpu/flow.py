@@ -349,11 +349,11 @@ class FlowEstimator:
 
 
 def estimate_flow(frame_t, frame_t1, *, cfa: str | None = "GRBG", init=None, config: FlowConfig = FlowConfig(),
-                  device: str | None = None, backend: str | None = None) -> FlowResult:
+                  rig: Rig | None = None, device: str | None = None, backend: str | None = None) -> FlowResult:
     """Per-tile motion vectors from ``frame_t`` to ``frame_t1``: ``(height, width)`` frames of one camera, or
-    ``(cams, height, width)`` of a rig's cameras (their flow combined per tile). One-shot: build a
-    ``FlowEstimator`` to measure many pairs of one size."""
+    ``(cams, height, width)`` of a rig's cameras (their flow combined per tile, aligned by ``rig``'s disparity:
+    default the ideal quad). One-shot: build a ``FlowEstimator`` to measure many pairs of one size."""
     a = _frames("frame_t", frame_t)
-    estimator = FlowEstimator(a.shape[1], a.shape[2], cams=a.shape[0], cfa=cfa, config=config, device=device,
-                              backend=backend)
+    estimator = FlowEstimator(a.shape[1], a.shape[2], cams=a.shape[0], cfa=cfa, config=config, rig=rig,
+                              device=device, backend=backend)
     return estimator.estimate(a, frame_t1, init=init)
