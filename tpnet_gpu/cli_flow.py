@@ -1,12 +1,14 @@
 """``tpnet flow``: per-tile motion vectors between frames (``tpnet_gpu.flow``), two frames or a sequence.
 
 Inputs: two frames ``A B``, more frames in order, or one folder holding a sequence (its scene folders, or else its
-raw / image files, in name order). A frame is a scene folder (its cameras' flow combined, or ``--camera N``'s), a
-raw file or an ordinary image (``stereo_io.load_frame``). Per consecutive pair k the output folder (written whole
-or not at all, ``tpnet_gpu.outputs``) gets ``flow_k.tif`` (``(2, tiles_y, tiles_x)`` float32: x, y px; NaN where
-not valid), ``confidence_k.tif``, ``flow_k.png`` (direction as hue, length as brightness) and, unless
-``--no-figures``, ``flow_k_figure.png`` (the x and y components, labelled, with colour bars in px; docs/outputs.md
-§2); k is ``NNNN`` for a sequence and empty for one pair. Each pair starts from the previous pair's flow (a sequence's motion is smooth).
+raw / image files, in name order). A frame is a scene folder (its cameras' flow combined, aligned by the disparity
+engine with the ideal quad of the frame size, so 4 cameras; or ``--camera N``'s), a raw file or an ordinary image
+(``stereo_io.load_frame``). Per consecutive pair k the output folder (written whole or not at all,
+``tpnet_gpu.outputs``) gets ``flow_k.tif`` (``(2, tiles_y, tiles_x)`` float32: x, y px; NaN where not valid),
+``confidence_k.tif``, ``flow_k.png`` (direction as hue, length as brightness) and, unless ``--no-figures``,
+``flow_k_figure.png`` (the x and y components, labelled, with colour bars in px; docs/outputs.md §2); k is ``NNNN``
+for a sequence and empty for one pair. Each pair starts from the previous pair's flow (a sequence's motion is
+smooth).
 """
 
 from __future__ import annotations

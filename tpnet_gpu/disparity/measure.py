@@ -37,6 +37,7 @@ def row_chunks(x: torch.Tensor, index: torch.Tensor):
 
 
 WIDEN_SIGMA = 0.9  # px: Gaussian blur of mono correlations before the peak is located
+RIVAL_APART = 1.5  # px: a rival peak (Peak2D.rival) is a local maximum at least this far from the measured one
 
 
 def gaussian_blur(corr: torch.Tensor, sigma: float) -> torch.Tensor:
@@ -154,11 +155,31 @@ class Peak2D:
                                align_corners=True)[:, 0, 0]
         return values / (self.overlap(x) * self.overlap(y)).clamp(min=0.05)
 
-    def measure(self, corr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        tiles = corr.shape[0]
+    def _located(self, corr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(raw, located, coarse)``, each ``(T, 15, 15)``: ``corr`` without NaN; where its peak is located
+        (blurred when ``widen``); that overlap-normalised at whole lags, -inf outside +-``reach``."""
         raw = torch.nan_to_num(corr.float(), nan=0.0)
         located = gaussian_blur(raw[:, None], WIDEN_SIGMA)[:, 0] if self.widen else raw
-        coarse = torch.where(self.inside, located * self.coarse_scale, torch.full_like(located, -float("inf")))
+        return raw, located, torch.where(self.inside, located * self.coarse_scale,
+                                         torch.full_like(located, -float("inf")))
+
+    def rival(self, corr: torch.Tensor) -> torch.Tensor:
+        """``(T,)`` the strongest whole-lag local maximum of ``corr (T, 15, 15)`` within +-``reach`` and more
+        than ``RIVAL_APART`` px from lag 0, over the strongest value within that distance (as located; not
+        overlap-normalised: that would lift the noise of the far lags; 0 without a rival, 1 where nothing near
+        lag 0 is positive): near 1 where a periodic or 1-D texture matches at another shift as well."""
+        _, located, _ = self._located(corr)
+        tiles = corr.shape[0]
+        apart = (self.lags[:, None] ** 2 + self.lags[None, :] ** 2) > RIVAL_APART**2  # (15, 15)
+        near = torch.where(apart, torch.full_like(located, -float("inf")), located).reshape(tiles, -1).max(dim=1).values
+        top = F.max_pool2d(located[:, None], 3, stride=1, padding=1)[:, 0]
+        peaks = (located >= top) & apart & self.inside
+        best = torch.where(peaks, located, torch.zeros_like(located)).reshape(tiles, -1).max(dim=1).values.clamp(min=0)
+        return torch.where(near > 0, best / torch.where(near > 0, near, torch.ones_like(near)), torch.ones_like(near))
+
+    def measure(self, corr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        tiles = corr.shape[0]
+        raw, located, coarse = self._located(corr)
         flat = torch.argmax(coarse.reshape(tiles, -1), dim=1)
         side = 2 * CORR_RADIUS + 1
         cy, cx = self.lags[flat // side], self.lags[flat % side]  # (T,)
