@@ -141,3 +141,18 @@ def test_calibrated_rig_of_another_size_is_refused():
     with pytest.raises(ValueError, match="spec.rig: expected a calibrated rig of the data set's size 64x48, "
                                          "got 2592x1936"):
         dataset.spec_rig(DatasetSpec(width=64, height=48, rig=rig))
+
+
+def test_no_scenes_is_a_one_line_error_and_no_folder(tmp_path, capsys):
+    # Oracle: the CLI contract (one line `tpnet dataset: error: ...` naming the option, exit 2, nothing written);
+    # before, `--scenes 0` exited 0 with an empty data set.
+    from tpnet_gpu import cli  # noqa: PLC0415
+
+    for scenes in ("0", "-3"):
+        assert cli.main(["dataset", str(tmp_path / "d"), "--scenes", scenes, "--width", "64", "--height", "48"]) == 2
+        err = capsys.readouterr().err
+        assert err == f"tpnet dataset: error: --scenes: expected at least 1 scene, got {scenes}\n"
+    assert not (tmp_path / "d").exists()
+    with pytest.raises(ValueError, match="spec.scenes: expected at least 1 scene, got 0"):
+        dataset.build(tmp_path / "lib", DatasetSpec(scenes=0, width=64, height=48), device="cpu", progress=False)
+    assert not (tmp_path / "lib").exists()

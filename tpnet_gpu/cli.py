@@ -161,6 +161,8 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 def _cmd_dataset(args: argparse.Namespace) -> int:
     from tpnet_gpu.dataset import DatasetSpec, build
 
+    if args.scenes < 1:  # before any folder is made: zero scenes would be an empty data set, not an error
+        raise ValueError(f"--scenes: expected at least 1 scene, got {args.scenes}")
     rig = None
     if args.rig is not None:
         from tpnet_gpu import rigfile  # noqa: PLC0415

@@ -163,6 +163,8 @@ def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = Non
     workers (the same chunks, bit for bit), or None to build them here, one after another."""
     from tpnet_gpu.progress import bar  # noqa: PLC0415
 
+    if spec.scenes < 1:
+        raise ValueError(f"spec.scenes: expected at least 1 scene, got {spec.scenes}")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     missing = [i for i in range(spec.scenes) if not chunk_path(folder, i).exists()]

@@ -2,6 +2,8 @@
 quad, and an 8-bit photograph pair. Oracle: the renderer's per-tile ground truth (flat tiles:
 tpnet_gpu/evaluation.py) or the exact Fourier shift. Bounds: measured values (320x240, seed 3) with margin."""
 
+import functools
+
 import numpy as np
 import pytest
 import skimage.data
@@ -30,8 +32,15 @@ def flat_stats(rendered, disparity) -> dict:
     return evaluation.error_stats(disparity.numpy().astype(np.float64), rendered.tile_disparity, classes["flat"])
 
 
+@functools.cache
+def rendered_scene(rig: Rig):
+    """The demo scene rendered by ``rig`` (once per module: a 320x240 render is most of a run, the distorted
+    one ~60 % of the calibrated test; the tests only read it)."""
+    return render(demo_scene(rig, seed=3), rig, sensor=Sensor(), supersample=2, seed=3)
+
+
 def run(rig: Rig, engine_rig: Rig | None = None):
-    rendered = render(demo_scene(rig, seed=3), rig, sensor=Sensor(), supersample=2, seed=3)
+    rendered = rendered_scene(rig)
     frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
     engine = DisparityEngine(H, W, rig=engine_rig or rig, cfa=rendered.sensor.cfa, device="cpu")
     return rendered, engine.run(frames)
@@ -183,7 +192,7 @@ def test_refinement_cannot_drag_a_clear_answer_away(monkeypatch, leash, fails):
 
     monkeypatch.setattr(Measurer, "measure", pulled)
     rig = RIGS["quad"]
-    rendered = render(demo_scene(rig, seed=3), rig, sensor=Sensor(), supersample=2, seed=3)
+    rendered = rendered_scene(rig)
     frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
     engine = DisparityEngine(H, W, rig=rig, cfa=rendered.sensor.cfa, config=EngineConfig(leash=leash), device="cpu")
     stats = flat_stats(rendered, engine.run(frames).disparity)
