@@ -18,10 +18,17 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from tpnet_gpu import tables
+from tpnet_gpu.layout import TILE_CENTRE, TILE_STRIDE
 
 DISTORTION_TERMS = 7  # C, B, A, A5, A6, A7, A8: k(rho) = 1 + sum a_j (rho^(j+1) - 1)
 EXTRINSIC_TERMS = 13  # tilt0..2, az0..2, roll0..3, zoom0..2 (radians; zoom = relative scale - 1)
 
+
+
+def grid_centres(tiles_y: int, tiles_x: int) -> np.ndarray:
+    """``(tiles_y, tiles_x, 2)`` float64 (x, y) pixel centres of a tile grid: tile (tx, ty) at (8 tx + 4, 8 ty + 4)."""
+    ty, tx = np.meshgrid(np.arange(tiles_y), np.arange(tiles_x), indexing="ij")
+    return np.stack([TILE_STRIDE * tx + TILE_CENTRE, TILE_STRIDE * ty + TILE_CENTRE], axis=-1).astype(np.float64)
 
 @dataclass(frozen=True)
 class Rig:
@@ -193,8 +200,7 @@ class Rig:
         """Per-camera tile centres ``(tiles, cams, 2)`` for target disparities ``(tiles_y, tiles_x)``;
         tile (tx, ty) is centred at (8 tx + 4, 8 ty + 4) in the virtual camera. NaN disparity gives NaN."""
         disparity = np.asarray(disparity, dtype=np.float64)
-        ty, tx = np.meshgrid(np.arange(disparity.shape[0]), np.arange(disparity.shape[1]), indexing="ij")
-        centre = np.stack([8.0 * tx + 4.0, 8.0 * ty + 4.0], axis=-1)
+        centre = grid_centres(*disparity.shape)
         return self.port_coordinates(centre, disparity).reshape(-1, self.cams, 2)
 
     # --- rays and world points (A.8) -----------------------------------------------------------------------------

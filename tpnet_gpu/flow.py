@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
-from tpnet_gpu.camera import Rig
+from tpnet_gpu.camera import Rig, grid_centres
 from tpnet_gpu.disparity.engine import DisparityEngine, correlation_for, neighbourhood, reference_scale
 from tpnet_gpu.disparity.measure import Peak2D, row_chunks
 from tpnet_gpu.disparity.pairs import combine_pairs
@@ -142,8 +142,7 @@ class FlowEstimator:
         self.device = self.tp.torch_device
         self.grid = (self.tp.tiles_y, self.tp.tiles_x)
         self.peak = Peak2D(self.device, reach=config.reach, widen=cfa is None)
-        ty, tx = torch.meshgrid(torch.arange(self.grid[0]), torch.arange(self.grid[1]), indexing="ij")
-        self.centres = torch.stack([8.0 * tx + 4.0, 8.0 * ty + 4.0], dim=-1).reshape(-1, 1, 2).float().to(self.device)
+        self.centres = torch.from_numpy(grid_centres(*self.grid)).reshape(-1, 1, 2).float().to(self.device)
         # several cameras: their tiles aligned by the disparity engine's maps of both frames
         self.engine = None if cams == 1 else DisparityEngine(height, width, rig=rig, cfa=cfa, device=device,
                                                                backend=backend)

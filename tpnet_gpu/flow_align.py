@@ -17,8 +17,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from tpnet_gpu.camera import Rig
+from tpnet_gpu.camera import Rig, grid_centres
 from tpnet_gpu.disparity.engine import neighbourhood
+from tpnet_gpu.layout import TILE_CENTRE, TILE_STRIDE
 
 FILL_STEPS = 8  # neighbour-median sweeps that carry measured disparities into unmeasured tiles
 
@@ -49,8 +50,7 @@ class Alignment:
 
     def __init__(self, rig: Rig, grid: tuple[int, int], device):
         self.rig, self.grid, self.device = rig, grid, device
-        ty, tx = np.meshgrid(np.arange(grid[0]), np.arange(grid[1]), indexing="ij")
-        self.tiles = np.stack([8.0 * tx + 4.0, 8.0 * ty + 4.0], axis=-1).reshape(-1, 2)  # (T, 2) virtual grid
+        self.tiles = grid_centres(*grid).reshape(-1, 2)  # (T, 2) virtual grid
         self.d_t = self.d_t1 = self.first = None
 
     def set_maps(self, d_t: torch.Tensor, d_t1: torch.Tensor) -> None:
@@ -65,8 +65,8 @@ class Alignment:
         f = np.nan_to_num(flow.double().cpu().numpy(), nan=0.0)
         moved = self.tiles + f
         # frame t+1's disparity at the moved point: its nearest tile's (a depth edge keeps one side's)
-        iy = np.clip(np.rint((moved[:, 1] - 4.0) / 8.0), 0, self.grid[0] - 1).astype(int)
-        ix = np.clip(np.rint((moved[:, 0] - 4.0) / 8.0), 0, self.grid[1] - 1).astype(int)
+        iy = np.clip(np.rint((moved[:, 1] - TILE_CENTRE) / TILE_STRIDE), 0, self.grid[0] - 1).astype(int)
+        ix = np.clip(np.rint((moved[:, 0] - TILE_CENTRE) / TILE_STRIDE), 0, self.grid[1] - 1).astype(int)
         # the motion in depth, the disparity change, as the 3x3 median over the tiles: the difference of two
         # maps carries both maps' noise (3 tuning scenes, 4 cameras, the translations: mean gross 2.2 -> 1.7 %)
         change = torch.from_numpy(self.d_t1[iy, ix] - self.d_t).reshape(self.grid)

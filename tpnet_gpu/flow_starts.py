@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import torch
 
-from tpnet_gpu.layout import TILE_SIZE
+from tpnet_gpu.layout import TILE_CENTRE, TILE_SIZE, TILE_STRIDE
 
 BIN = 2  # px of a level per px of the next coarser one
 
@@ -39,8 +39,8 @@ def scaled_start(coarse: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
     cty, ctx = coarse.shape[:2]
     device = coarse.device
     # fine centre 8 t + 4 is at (8 t + 4) / BIN on the coarse level, whose tile c is centred at 8 c + 4
-    iy = torch.round(((8.0 * torch.arange(grid[0], device=device) + 4.0) / BIN - 4.0) / 8.0).long()
-    ix = torch.round(((8.0 * torch.arange(grid[1], device=device) + 4.0) / BIN - 4.0) / 8.0).long()
+    iy, ix = (torch.round(((TILE_STRIDE * torch.arange(n, device=device) + TILE_CENTRE) / BIN - TILE_CENTRE)
+                          / TILE_STRIDE).long() for n in grid)
     inside = (iy[:, None] >= 0) & (iy[:, None] < cty) & (ix[None, :] >= 0) & (ix[None, :] < ctx)
     start = BIN * coarse[iy.clamp(0, cty - 1)][:, ix.clamp(0, ctx - 1)]  # (ty, tx, 2)
     start = torch.where(inside[..., None], start, torch.full_like(start, float("nan")))

@@ -8,6 +8,7 @@ DTT_SIZE = 8  # N: points of one 8-point transform; frequencies per axis
 TILE_SIZE = 2 * DTT_SIZE  # 16: side of a tile's window, pixels
 HALF_TILE = DTT_SIZE  # 8: window corner = tile centre - HALF_TILE
 TILE_STRIDE = DTT_SIZE  # 8: tile grid step, pixels; tile (tx, ty) is centred at (8 tx + 4, 8 ty + 4)
+TILE_CENTRE = TILE_STRIDE / 2  # 4.0: the centre of tile 0, pixels (camera.grid_centres)
 CORR_RADIUS = 7  # pixel-domain correlations keep lags -7..7 (lag +-8 is dropped)
 CORR_SIDE = 2 * CORR_RADIUS + 1  # 15
 NET_RADIUS = 4  # the network reads the 9x9 centre of each combined correlation

@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from tpnet_gpu.camera import Rig
+from tpnet_gpu.camera import Rig, grid_centres
 from tpnet_gpu.scenes.objects import Patch, Scene, Sky
 
 SKY_DISTANCE_MM = 1e12  # a sky ray's point for the projection: a parallax under 1e-6 px for any rig here
@@ -90,6 +90,6 @@ def true_flow(scene: Scene, rig: Rig, motion: RigMotion, cam: int, pixels) -> np
 def tile_flow(scene: Scene, rig: Rig, motion: RigMotion, cam: int) -> np.ndarray:
     """``(tiles_y, tiles_x, 2)`` ground-truth flow (x, y px) of camera ``cam`` at the tile centres
     (8 tx + 4, 8 ty + 4) of its own image."""
-    ty, tx = np.meshgrid(np.arange(rig.height // 8), np.arange(rig.width // 8), indexing="ij")
-    centres = np.stack([8.0 * tx + 4.0, 8.0 * ty + 4.0], axis=-1).reshape(-1, 2)
-    return true_flow(scene, rig, motion, cam, centres).reshape(*tx.shape, 2)
+    grid = (rig.height // 8, rig.width // 8)
+    centres = grid_centres(*grid).reshape(-1, 2)
+    return true_flow(scene, rig, motion, cam, centres).reshape(*grid, 2)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tpnet_gpu import tables
-from tpnet_gpu.camera import Rig
+from tpnet_gpu.camera import Rig, grid_centres
 from tpnet_gpu.scenes.objects import Scene
 
 ROWS_PER_CHUNK = 64
@@ -180,8 +180,7 @@ def tile_ground_truth(scene: Scene, rig: Rig, disparity, objects, luminance, *, 
     """Per tile: disparity at the centre ray, spread and confidence over the 16x16 window (clipped to the
     image). Confidence = min(1, luminance std / ``texture_floor``), x 0.1 where the window sees > 1 object."""
     tiles_y, tiles_x = rig.height // 8, rig.width // 8
-    ty, tx = np.meshgrid(np.arange(tiles_y), np.arange(tiles_x), indexing="ij")
-    centres = np.stack([8.0 * tx + 4.0, 8.0 * ty + 4.0], axis=-1).reshape(-1, 2)
+    centres = grid_centres(tiles_y, tiles_x).reshape(-1, 2)
     _, depth, _ = scene.trace(np.zeros((len(centres), 3)), rig.virtual_rays(centres))
     with np.errstate(divide="ignore"):
         tile_d = (rig.focal_mm * rig.baseline_mm / (depth * rig.pixel_size_mm)).reshape(tiles_y, tiles_x)
