@@ -117,25 +117,31 @@ def test_two_depth_flags_tiles_beside_a_depth_step():
 
 def test_settle_moves_only_weak_outliers_on_a_surface():
     """Oracle: hand-computed strength-weighted means. A plane at 5.0 px (strength 0.5) with 0.2 px of stripes;
-    a weak tile (0.1) at 6.5 px takes the mean of the 8 surface tiles around it (it is off the surface band, so
-    its own value does not count); the same tile strong (0.5) keeps 6.5; a weak tile 0.4 px from its surface mean keeps its value
+    a weak tile (0.1) at 7.0 px takes the mean of the 8 surface tiles around it (it is off the surface band of
+    1.5 px, so its own value does not count); the same tile strong (0.5) keeps 7.0; a weak tile 1.3 px off its
+    surface (within the band: on it) takes the strength-weighted mean with itself in it; a weak tile 0.4 px from
+    its surface mean keeps its value
     (within ``WEAK_OFF``); a weak tile on a 1-tile-wide ridge of 9 px (3 of its 9 neighbourhood tiles) keeps
     it; unmeasured tiles stay NaN."""
     grid = torch.full((7, 9), 5.0)
     grid[:, ::2] += 0.2
     strength = torch.full((7, 9), 0.5)
-    grid[2, 2], strength[2, 2] = 6.5, 0.1  # weak outlier
-    grid[2, 5], strength[2, 5] = 6.5, 0.5  # strong: its own peak
+    grid[2, 2], strength[2, 2] = 7.0, 0.1  # weak outlier
+    grid[2, 5], strength[2, 5] = 7.0, 0.5  # strong: its own peak
+    grid[5, 4], strength[5, 4] = 6.5, 0.1  # weak, 1.3 px off: on the surface band
     grid[4, 2], strength[4, 2] = grid[4, 2] + 0.3, 0.1  # weak, 0.4 px from its surface: within WEAK_OFF
     grid[:, 7], strength[5, 7] = 9.0, 0.1  # a ridge one tile wide
     grid[0, 0] = float("nan")
     settled = settle(grid, strength)
     ring = [grid[y, x] for y in (1, 2, 3) for x in (1, 2, 3) if (y, x) != (2, 2)]
     assert settled[2, 2] == pytest.approx(float(sum(ring)) / 8, abs=1e-6)  # equal strengths: the plain mean
-    assert settled[2, 5] == 6.5 and settled[4, 2] == grid[4, 2] and settled[5, 7] == 9.0
+    assert settled[2, 5] == 7.0 and settled[4, 2] == grid[4, 2] and settled[5, 7] == 9.0
+    around = [(grid[y, x], strength[y, x]) for y in (4, 5, 6) for x in (3, 4, 5)]
+    weighted = sum(float(g) * float(w) for g, w in around) / sum(float(w) for _, w in around)
+    assert settled[5, 4] == pytest.approx(weighted, abs=1e-6)
     assert torch.isnan(settled[0, 0])
     unchanged = torch.ones(7, 9, dtype=torch.bool)
-    unchanged[2, 2] = unchanged[0, 0] = False
+    unchanged[2, 2] = unchanged[0, 0] = unchanged[5, 4] = False
     assert torch.equal(settled[unchanged], grid[unchanged])
 
 
