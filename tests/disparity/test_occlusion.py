@@ -28,15 +28,16 @@ def test_a_near_block_hides_the_cameras_that_see_it_displaced_over_the_tile():
     16 px from it: not hidden. So tile 7 keeps only the left-hand cameras (0, 2) and their pair."""
     occlusion = Occlusion(tables.QUAD_OFFSETS, tables.QUAD_PAIRS, jump=4.0, span=40.0)
     disparity = block_map()
-    hidden = occlusion.hidden(disparity, torch.zeros_like(disparity))
     row = 5
-    assert hidden[row, 7].tolist() == [False, True, False, True]
-    assert not hidden[row, 6].any() and not hidden[row, :6].any()
+    tiles = row * 16 + torch.arange(10)  # the background row's tiles 0..9
+    hidden = occlusion.hidden(disparity, torch.zeros(10), tiles)
+    assert hidden[7].tolist() == [False, True, False, True]
+    assert not hidden[:7].any()
     visible = occlusion.visible_pairs(hidden)
-    assert [tables.QUAD_PAIRS[p] for p in torch.nonzero(visible[row, 7])[:, 0].tolist()] == [(0, 2)]
+    assert [tables.QUAD_PAIRS[p] for p in torch.nonzero(visible[7])[:, 0].tolist()] == [(0, 2)]
     # a tile 3 px nearer than the block is not "behind" it (jump 4 px), and the block's own tiles at 32 px are not
-    assert not occlusion.hidden(disparity, torch.full_like(disparity, 29.0))[row, 7].any()
-    assert not occlusion.hidden(disparity, disparity)[row, 10:].any()
+    assert not occlusion.hidden(disparity, torch.full((1,), 29.0), tiles[7:8]).any()
+    assert not occlusion.hidden(disparity, torch.full((6,), 32.0), row * 16 + torch.arange(10, 16)).any()
 
 
 def test_lowest_is_the_least_disparity_within_the_radius():

@@ -266,18 +266,26 @@ class DisparityEngine:
         around it with the pairs that surface does not hide (see ``OCCLUSION_JUMP``); returns the share of tiles
         measured (0: none, the volume is unchanged)."""
         background = lowest(found, BACKGROUND_RADIUS)
-        hidden = self.occlusion.hidden(found, background)  # (ty, tx, cams)
-        visible = self.occlusion.visible_pairs(hidden)  # (ty, tx, P)
-        tried = (found - background > OCCLUSION_JUMP) & hidden.any(dim=-1) & visible.any(dim=-1)
-        share = float(tried.float().mean())
-        if share == 0:
+        near = torch.nonzero((found - background > OCCLUSION_JUMP).reshape(-1))[:, 0]  # (N,) flat tile numbers
+        if near.numel() == 0:
             return 0.0
-        corr = self.measure_at(self.tp, torch.where(tried, background, found), active=tried).corr
-        visible = visible.reshape(-1, visible.shape[-1])
-        for part, rows in row_chunks(corr, torch.nonzero(tried.reshape(-1))[:, 0]):
+        hidden = self.occlusion.hidden(found, background.reshape(-1)[near], near)  # (N, cams)
+        visible = self.occlusion.visible_pairs(hidden)  # (N, P)
+        keep = hidden.any(dim=-1) & visible.any(dim=-1)
+        tiles, visible = near[keep], visible[keep]
+        if tiles.numel() == 0:
+            return 0.0
+        tried = torch.zeros(found.numel(), dtype=torch.bool, device=found.device)
+        tried[tiles] = True
+        target = torch.where(tried.reshape(found.shape), background, found)
+        corr = self.measure_at(self.tp, target, active=tried.reshape(found.shape)).corr
+        share = tiles.numel() / found.numel()
+        done = 0  # the chunks are consecutive runs of ``tiles``: their rows of ``visible`` follow on
+        for part, rows in row_chunks(corr, tiles):
+            seen = visible[done: done + part.numel()]
+            done += part.numel()
             values = self.sampler.sample(rows, self.unhidden_offsets)  # (T, P, E)
-            seen = visible.index_select(0, part)[:, :, None]
-            combined = combine_pairs(torch.where(seen, values, torch.full_like(values, float("nan"))))
+            combined = combine_pairs(torch.where(seen[:, :, None], values, torch.full_like(values, float("nan"))))
             volume.add(background.reshape(-1).index_select(0, part), self.unhidden_offsets, combined,
                        self.config.reach, part)
         return share

@@ -4,7 +4,7 @@ Convention (pairs.py): camera i sees a centre-camera point p of disparity d at p
 baselines). A tile at p tried at a background disparity b is hidden from camera i by a tile u of the current
 map with disparity D_u > b when u's image in that camera, p_u - D_u r_i, falls on the tile's window there,
 p - b r_i: when ``|8 (u - t) - r_i (D_u - b)| <= OCCLUDER_REACH`` in x and y (tile units of 8 px). Torch on the
-map's device, vectorised over tiles.
+map's device, vectorised over the tiles asked about.
 """
 
 from __future__ import annotations
@@ -20,27 +20,10 @@ TILE_STRIDE = TILE_SIZE // 2  # px between tile centres
 OCCLUDER_REACH = TILE_SIZE / 2
 
 
-def shifted(grid: torch.Tensor, dy: int, dx: int, radius: int) -> torch.Tensor:
-    """``(ty, tx)``: ``grid`` at tile (y + dy, x + dx) for each tile (NaN beyond the edge); ``radius`` >= |dy|,
-    |dx| is the padding of one shared padded copy (see ``padded``)."""
-    ty, tx = grid.shape[0] - 2 * radius, grid.shape[1] - 2 * radius
-    return grid[radius + dy: radius + dy + ty, radius + dx: radius + dx + tx]
-
-
-def padded(grid: torch.Tensor, radius: int) -> torch.Tensor:
-    """``(ty + 2 radius, tx + 2 radius)``: ``grid (ty, tx)`` with a NaN border (for ``shifted``)."""
-    return F.pad(grid[None, None], (radius,) * 4, value=float("nan"))[0, 0]
-
-
 def lowest(disparity: torch.Tensor, radius: int) -> torch.Tensor:
     """``(ty, tx)``: the least finite disparity of each tile's ``(2 radius + 1)^2`` neighbourhood (inf if none)."""
-    grid = padded(disparity, radius)
-    grid = torch.where(torch.isnan(grid), float("inf"), grid)  # (nan_to_num would turn inf into the float max)
-    out = torch.full_like(disparity, float("inf"))
-    for dy in range(-radius, radius + 1):
-        for dx in range(-radius, radius + 1):
-            out = torch.minimum(out, shifted(grid, dy, dx, radius))
-    return out
+    high = torch.where(torch.isnan(disparity), -float("inf"), -disparity)  # (nan_to_num would give the float max)
+    return -F.max_pool2d(high[None, None], 2 * radius + 1, stride=1, padding=radius)[0, 0]
 
 
 class Occlusion:
@@ -67,19 +50,22 @@ class Occlusion:
             self.reach.append(offsets_c)
         self.offsets = [(float(rx), float(ry)) for rx, ry in r]
 
-    def hidden(self, disparity: torch.Tensor, background: torch.Tensor) -> torch.Tensor:
-        """``(ty, tx, cams)`` bool: camera i's view of each tile at disparity ``background (ty, tx)`` is covered by
-        a tile of ``disparity (ty, tx)`` more than ``jump`` px nearer (see the module docstring)."""
-        grid = padded(disparity, self.radius)
-        out = torch.zeros((*disparity.shape, len(self.offsets)), dtype=torch.bool, device=disparity.device)
+    def hidden(self, disparity: torch.Tensor, background: torch.Tensor, tiles: torch.Tensor) -> torch.Tensor:
+        """``(N, cams)`` bool: camera i's view of tile ``tiles (N,)`` (flat numbers) at disparity ``background
+        (N,)`` is covered by a tile of ``disparity (ty, tx)`` more than ``jump`` px nearer (see the module
+        docstring). Only those tiles are read (a few gathers per camera and tile offset)."""
+        width = disparity.shape[1] + 2 * self.radius
+        grid = F.pad(disparity[None, None], (self.radius,) * 4, value=float("nan")).reshape(-1)  # NaN: never nearer
+        base = (tiles // disparity.shape[1] + self.radius) * width + tiles % disparity.shape[1] + self.radius
+        out = torch.zeros((tiles.numel(), len(self.offsets)), dtype=torch.bool, device=disparity.device)
         for cam, ((rx, ry), reach) in enumerate(zip(self.offsets, self.reach)):
             for dy, dx in reach:
-                rel = shifted(grid, dy, dx, self.radius) - background  # NaN beyond the edge: never nearer
-                out[..., cam] |= ((rel > self.jump) & ((TILE_STRIDE * dx - rx * rel).abs() <= OCCLUDER_REACH)
-                                  & ((TILE_STRIDE * dy - ry * rel).abs() <= OCCLUDER_REACH))
+                rel = grid[base + dy * width + dx] - background
+                out[:, cam] |= ((rel > self.jump) & ((TILE_STRIDE * dx - rx * rel).abs() <= OCCLUDER_REACH)
+                                & ((TILE_STRIDE * dy - ry * rel).abs() <= OCCLUDER_REACH))
         return out
 
     def visible_pairs(self, hidden: torch.Tensor) -> torch.Tensor:
-        """``(ty, tx, P)`` bool: pairs neither of whose cameras is ``hidden (ty, tx, cams)``."""
+        """``(N, P)`` bool: pairs neither of whose cameras is ``hidden (N, cams)``."""
         pairs = self.pairs.to(hidden.device)
         return ~(hidden[..., pairs[:, 0]] | hidden[..., pairs[:, 1]])
