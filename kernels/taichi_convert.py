@@ -8,7 +8,7 @@ then the optional aberration-kernel product (§5.2). The per-camera pieces are `
 here and the fused kernel (kernels/taichi_fused.py) both call.
 
 Speed (CPU): the basis of a shift s is built by angle addition from shift-free constant tables
-(``operators.shifted_basis_parts``, uploaded by the processor): one sine and cosine per axis instead of 256. A colour's rows are streamed:
+(``operators.shifted_basis_parts``, compile-time constants): one sine and cosine per axis instead of 256. A colour's rows are streamed:
 each image row's horizontal transform (only the columns of that colour's parity, the Bayer masks being 2-periodic
 along a row) is added into the 16 x 16 result at once, so no intermediate tile is kept; rows without the colour
 are skipped.
@@ -20,11 +20,15 @@ horizontal cos | sin]: quadrant q = 2 (vertical sine) + (horizontal sine) is ``g
 
 import taichi as ti
 
+from tpnet_gpu import operators
 from tpnet_gpu.kernels.frames import CENTRE_LIMIT, HALF_WINDOW, WINDOW
 from tpnet_gpu.kernels.taichi_frames import window_corner
-from tpnet_gpu.kernels.taichi_types import F32_2D, F32_3D, U8_1D
+from tpnet_gpu.kernels.taichi_types import F32_3D, U8_1D
 from tpnet_gpu.layout import FLOAT32_MAX, PIXEL_LIMIT
 from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
+
+_WINDOW_PARTS, _PHASE_PARTS = operators.shifted_basis_parts()
+WINDOW_PARTS, PHASE_PARTS = _WINDOW_PARTS.tolist(), _PHASE_PARTS.tolist()  # compile-time constants
 
 # Where one camera's window lies: padded-frame corner, residual shifts, Bayer parity, kernel-grid node, flags.
 CameraWindow = ti.types.struct(oy=ti.i32, ox=ti.i32, sx=ti.f32, sy=ti.f32, parity=ti.i32, kny=ti.i32, knx=ti.i32,
@@ -74,20 +78,9 @@ def camera_window(centres: ti.template(), tile: ti.i32, cam: ti.i32, image_heigh
 
 
 @ti.func
-def window_finite(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32) -> ti.i32:
-    """1 when every pixel of the 16 x 16 window at (oy, ox) is finite and at most PIXEL_LIMIT (``is_pixel``)."""
-    finite = 1
-    for r in range(WINDOW):
-        for c in ti.static(range(WINDOW)):
-            if not is_pixel(padded[cam, oy + r, ox + c]):
-                finite = 0
-    return finite
-
-
-@ti.func
-def axis_basis(s: ti.f32, window_parts: ti.template(), phase_parts: ti.template()):
+def axis_basis(s: ti.f32):
     """(16, 16) [n, j]: 1/2 w(n + s) cos(omega_k (n + s + 4.5)) for j = k < 8, the sine for j = 8 + k, by angle
-    addition from window_parts (2, 16) and phase_parts (2, 8, 16) (``operators.shifted_basis_parts``)."""
+    addition from the shift-free parts of ``operators.shifted_basis_parts`` (compile-time constants)."""
     theta = ti.math.pi * s / 16.0
     c1 = ti.cos(theta)
     s1 = ti.sin(theta)
@@ -101,29 +94,34 @@ def axis_basis(s: ti.f32, window_parts: ti.template(), phase_parts: ti.template(
         ck[k] = ck[k - 1] * c2 - sk[k - 1] * s2
         sk[k] = sk[k - 1] * c2 + ck[k - 1] * s2
     basis = ti.Matrix.zero(ti.f32, WINDOW, WINDOW)
-    for n in range(WINDOW):
-        half_w = 0.5 * (window_parts[0, n] * c1 + window_parts[1, n] * s1)
+    for n in ti.static(range(WINDOW)):
+        half_w = 0.5 * (ti.static(WINDOW_PARTS[0][n]) * c1 + ti.static(WINDOW_PARTS[1][n]) * s1)
         for k in ti.static(range(N)):
-            cos_phi = phase_parts[0, k, n]
-            sin_phi = phase_parts[1, k, n]
+            cos_phi = ti.static(PHASE_PARTS[0][k][n])
+            sin_phi = ti.static(PHASE_PARTS[1][k][n])
             basis[n, k] = half_w * (cos_phi * ck[k] - sin_phi * sk[k])
             basis[n, N + k] = half_w * (sin_phi * ck[k] + cos_phi * sk[k])
     return basis
 
 
 @ti.func
-def window_featured(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32) -> ti.i32:
-    """1 unless every pixel of the window (non-finite or beyond PIXEL_LIMIT read as 0) equals the first: a
-    featureless window is not valid (as kernels/convert.convert_camera)."""
+def window_flags(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32):
+    """(finite, featured) of the 16 x 16 window at (oy, ox), one read per pixel: finite is 1 when every pixel is
+    finite and at most PIXEL_LIMIT (``is_pixel``); featured is 1 unless every pixel (those failing ``is_pixel``
+    read as 0) equals the first - a featureless window is not valid (as kernels/convert.convert_camera)."""
     first = padded[cam, oy, ox]
     first = ti.select(is_pixel(first), first, 0.0)
+    finite = 1
     featured = 0
     for r in range(WINDOW):
         for c in ti.static(range(WINDOW)):
             v = padded[cam, oy + r, ox + c]
-            if ti.select(is_pixel(v), v, 0.0) != first:
+            ok = is_pixel(v)
+            if not ok:
+                finite = 0
+            if ti.select(ok, v, 0.0) != first:
                 featured = 1
-    return featured
+    return ti.math.ivec2(finite, featured)
 
 
 @ti.func
@@ -193,8 +191,6 @@ def convert_tiles(
     centres: F32_3D,
     active: U8_1D,
     masks: F32_3D,
-    window_parts: F32_2D,
-    phase_parts: F32_3D,
     kernels: F32_3D,
     kernel_rows: ti.i32,
     kernel_cols: ti.i32,
@@ -206,8 +202,8 @@ def convert_tiles(
     finite: U8_1D,
     valid: U8_1D,
 ):
-    """One thread per tile; arguments as kernels/convert.convert_tiles except the bases: window_parts (2, 16) and
-    phase_parts (2, 8, 16) of ``operators.shifted_basis_parts`` instead of the index tables; masks must be 2-periodic along rows (Bayer or mono). finite/valid out:
+    """One thread per tile; arguments as kernels/convert.convert_tiles except the bases (built in the kernel from the
+    compile-time parts of ``operators.shifted_basis_parts`` instead of the index tables); masks must be 2-periodic along rows (Bayer or mono). finite/valid out:
     (tiles,) uint8."""
     cams = centres.shape[1]
     for tile in range(centres.shape[0]):
@@ -219,10 +215,11 @@ def convert_tiles(
         else:
             for cam in range(cams):
                 win = camera_window(centres, tile, cam, image_height, image_width, kernel_rows, kernel_cols)
-                all_finite *= win.finite * window_finite(padded, cam, win.oy, win.ox)
-                all_inside *= win.inside * window_featured(padded, cam, win.oy, win.ox)
-                bx = axis_basis(win.sx, window_parts, phase_parts)
-                by = axis_basis(win.sy, window_parts, phase_parts)
+                flags = window_flags(padded, cam, win.oy, win.ox)
+                all_finite *= win.finite * flags[0]
+                all_inside *= win.inside * flags[1]
+                bx = axis_basis(win.sx)
+                by = axis_basis(win.sy)
                 for colour in range(colours):
                     g = forward_colour(padded, cam, win.oy, win.ox, masks, win.parity * colours + colour, bx, by)
                     store_clt(g, kernels, kernel_base(cam, win, kernel_rows, kernel_cols, colours, colour),

@@ -4,8 +4,9 @@
 ``correlate_pair`` (a ``ti.func``, called by the split kernel ``correlate_tiles`` here, one thread per (tile,
 pair), and by the fused kernel in kernels/taichi_fused.py): per frequency the conjugate bicomplex product per
 colour, the colour weights, the R+B low-pass, the fat-zero normalisation and the final low-pass; then the 8-point
-DCT-II/DST-II per quadrant and the lag unfold as a signed gather into the (2r+1)^2 tile (the same operator as the
-Warp kernel's two dense products). ``network_layers`` (per element) combines the quad's pairs.
+DCT-II/DST-II per quadrant and the lag unfold as a signed gather into the (2r+1)^2 tile (the same operator as
+the Warp kernel's two dense products); the spectrum is made row by row (``spectrum_row``), each row going
+through its column-side transform at once, so it is never stored whole. ``network_layers`` (per element) combines the quad's pairs.
 
 Speed (CPU): colours of zero weight are skipped (the caller passes the used colours); the 8-point transforms and
 the columns' unfold are compile-time constants (``operators.half_dtt2e``, ``operators.unfold_gather``), and each 8-point
@@ -54,67 +55,77 @@ def inverse_norm(x0: ti.f32, x1: ti.f32, x2: ti.f32, x3: ti.f32, fat_zero: ti.f3
 
 
 @ti.func
-def pair_spectrum(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.template(), positions: ti.template(),
-                  weights: ti.template(), colours: ti.i32, fat_zero: ti.f32, lpf_rb: ti.template(),
-                  lpf_corr: ti.template()):
-    """(16, 16) normalised, low-passed correlation spectrum of the tiles at src[base_a + 4 positions[u] + q] and
-    src[base_b + ...] over the used colours u (colour used[u], weight weights[u])."""
-    x = ti.Matrix.zero(ti.f32, 2 * N, 2 * N)
-    x_rb = ti.Matrix.zero(ti.f32, 2 * N, 2 * N)  # R + B, low-passed before green is added (§6.2)
+def spectrum_row(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.template(), positions: ti.template(),
+                 weights: ti.template(), has_rb: ti.i32, fat_zero: ti.f32, lpf_rb: ti.template(),
+                 lpf_corr: ti.template(), ky: ti.i32):
+    """(4, 8) [q, kx]: row ``ky`` of the normalised, low-passed correlation spectrum of the tiles at
+    src[base_a + 4 positions[u] + q] and src[base_b + ...] over the used colours u (colour used[u], weight
+    weights[u]); ``has_rb``: R or B is among them (their sum is low-passed before green is added, §6.2)."""
+    x = ti.Matrix.zero(ti.f32, 4, N)
+    x_rb = ti.Matrix.zero(ti.f32, 4, N)
     for u in range(used.shape[0]):
         ia = base_a + 4 * positions[u]
         ib = base_b + 4 * positions[u]
-        w_rb = ti.select(colours == 3 and used[u] < 2, weights[u], 0.0)
+        w_rb = ti.select(has_rb != 0 and used[u] < 2, weights[u], 0.0)
         w = weights[u] - w_rb
-        for ky in range(N):
-            for kx in ti.static(range(N)):
-                a0 = src[ia + 0, ky, kx]
-                a1 = src[ia + 1, ky, kx]
-                a2 = src[ia + 2, ky, kx]
-                a3 = src[ia + 3, ky, kx]
-                b0 = src[ib + 0, ky, kx]
-                b1 = src[ib + 1, ky, kx]
-                b2 = src[ib + 2, ky, kx]
-                b3 = src[ib + 3, ky, kx]
-                p = ti.Vector([a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3,  # conj(A) * B per frequency (§6.2)
-                               a0 * b1 - a1 * b0 + a2 * b3 - a3 * b2,
-                               a0 * b2 - a2 * b0 + a1 * b3 - a3 * b1,
-                               a0 * b3 + a3 * b0 - a1 * b2 - a2 * b1])
-                for q in ti.static(range(4)):
-                    x[N * (q >> 1) + ky, N * (q & 1) + kx] += w * p[q]
-                if w_rb != 0.0:
-                    for q in ti.static(range(4)):
-                        x_rb[N * (q >> 1) + ky, N * (q & 1) + kx] += w_rb * p[q]
-    for ky in range(N):
         for kx in ti.static(range(N)):
-            s = ti.Vector.zero(ti.f32, 4)
+            a0 = src[ia + 0, ky, kx]
+            a1 = src[ia + 1, ky, kx]
+            a2 = src[ia + 2, ky, kx]
+            a3 = src[ia + 3, ky, kx]
+            b0 = src[ib + 0, ky, kx]
+            b1 = src[ib + 1, ky, kx]
+            b2 = src[ib + 2, ky, kx]
+            b3 = src[ib + 3, ky, kx]
+            p = ti.Vector([a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3,  # conj(A) * B per frequency (§6.2)
+                           a0 * b1 - a1 * b0 + a2 * b3 - a3 * b2,
+                           a0 * b2 - a2 * b0 + a1 * b3 - a3 * b1,
+                           a0 * b3 + a3 * b0 - a1 * b2 - a2 * b1])
             for q in ti.static(range(4)):
-                s[q] = (x_rb[N * (q >> 1) + ky, N * (q & 1) + kx] * lpf_rb[ky, kx]
-                        + x[N * (q >> 1) + ky, N * (q & 1) + kx])
-            scale = inverse_norm(s[0], s[1], s[2], s[3], fat_zero) * lpf_corr[ky, kx]
+                x[q, kx] += w * p[q]
+            if has_rb != 0:
+                for q in ti.static(range(4)):
+                    x_rb[q, kx] += w_rb * p[q]
+    if has_rb != 0:  # without R and B this adds 0 * lpf_rb: skipped
+        for kx in ti.static(range(N)):
             for q in ti.static(range(4)):
-                x[N * (q >> 1) + ky, N * (q & 1) + kx] = s[q] * scale
+                x[q, kx] = x_rb[q, kx] * lpf_rb[ky, kx] + x[q, kx]
+    for kx in ti.static(range(N)):
+        scale = inverse_norm(x[0, kx], x[1, kx], x[2, kx], x[3, kx], fat_zero) * lpf_corr[ky, kx]
+        for q in ti.static(range(4)):
+            x[q, kx] = x[q, kx] * scale
     return x
 
 
 @ti.func
-def spectrum_to_lags(x: ti.template(), unfold_index: ti.template(), unfold_sign: ti.template(), corr: ti.template(),
-                     out: ti.i32):
-    """corr[out] (15, 15) = sum_q U_{q>>1} D_{q>>1} X_q D_{q&1}^T U_{q&1}^T: the 8-point DCT-II-e / DST-II-e D
-    (x 1/2) on both sides, each on folded inputs, then the unfold U as a signed gather (unfold_index /
-    unfold_sign (2, 15), ``operators.unfold_gather``, for the rows; their constants for the columns)."""
-    p = ti.Matrix.zero(ti.f32, 2 * N, 2 * N)  # P_q = X_q D_{q&1}^T (column side): p[row, 8 (q & 1) + m]
-    for row in range(2 * N):
-        acc = ti.Vector.zero(ti.f32, 2 * N)  # in registers: one store per element of p
-        for hs in ti.static(range(2)):
-            for k in ti.static(range(HALF)):
-                even = x[row, N * hs + k] + x[row, N * hs + N - 1 - k]
-                odd = x[row, N * hs + k] - x[row, N * hs + N - 1 - k]
-                for m in ti.static(range(0, N, 2)):
-                    acc[N * hs + m] += ti.static(HALF_DTT2E[hs][m][k]) * even
-                    acc[N * hs + m + 1] += ti.static(HALF_DTT2E[hs][m + 1][k]) * odd
-        for j in ti.static(range(2 * N)):
-            p[row, j] = acc[j]
+def correlate_pair(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.template(), positions: ti.template(),
+                   weights: ti.template(), colours: ti.i32, fat_zero: ti.f32, lpf_rb: ti.template(),
+                   lpf_corr: ti.template(), unfold_index: ti.template(), unfold_sign: ti.template(),
+                   corr: ti.template(), out: ti.i32):
+    """corr[out] (15, 15): the phase correlation of one pair = sum_q U_{q>>1} D_{q>>1} X_q D_{q&1}^T U_{q&1}^T,
+    X the spectrum (``spectrum_row``), D the 8-point DCT-II-e / DST-II-e (x 1/2) on both sides, each on folded
+    inputs, U the unfold as a signed gather (unfold_index / unfold_sign (2, 15), ``operators.unfold_gather``, for
+    the rows; their constants for the columns). Each spectrum row goes through its column-side transform as it
+    is made, so the spectrum is never stored whole."""
+    has_rb = 0
+    if colours == 3:
+        for u in range(used.shape[0]):
+            if used[u] < 2:
+                has_rb = 1
+    p = ti.Matrix.zero(ti.f32, 2 * N, 2 * N)  # P_q = X_q D_{q&1}^T (column side): p[8 (q >> 1) + ky, 8 (q & 1) + m]
+    for ky in range(N):
+        x = spectrum_row(src, base_a, base_b, used, positions, weights, has_rb, fat_zero, lpf_rb, lpf_corr, ky)
+        for vs in ti.static(range(2)):
+            acc = ti.Vector.zero(ti.f32, 2 * N)  # in registers: one store per element of p
+            for hs in ti.static(range(2)):
+                for k in ti.static(range(HALF)):
+                    even = x[2 * vs + hs, k] + x[2 * vs + hs, N - 1 - k]
+                    odd = x[2 * vs + hs, k] - x[2 * vs + hs, N - 1 - k]
+                    for m in ti.static(range(0, N, 2)):
+                        acc[N * hs + m] += ti.static(HALF_DTT2E[hs][m][k]) * even
+                        acc[N * hs + m + 1] += ti.static(HALF_DTT2E[hs][m + 1][k]) * odd
+            for j in ti.static(range(2 * N)):
+                p[N * vs + ky, j] = acc[j]
     y = ti.Matrix.zero(ti.f32, 2 * N, 2 * N)  # Y_q = D_{q>>1} P_q (row side): y[8 (q >> 1) + m, col]
     for col in range(2 * N):
         acc = ti.Vector.zero(ti.f32, 2 * N)
@@ -140,16 +151,6 @@ def spectrum_to_lags(x: ti.template(), unfold_index: ti.template(), unfold_sign:
         sign_r = unfold_sign[1, r]  # the cosine parts' signs are +1
         for c in ti.static(range(CORR_SIDE)):
             corr[out, r, c] = a[row_c, c] + sign_r * a[row_s, c]
-
-
-@ti.func
-def correlate_pair(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.template(), positions: ti.template(),
-                   weights: ti.template(), colours: ti.i32, fat_zero: ti.f32, lpf_rb: ti.template(),
-                   lpf_corr: ti.template(), unfold_index: ti.template(), unfold_sign: ti.template(),
-                   corr: ti.template(), out: ti.i32):
-    """corr[out] (15, 15): the phase correlation of one pair (see ``pair_spectrum``)."""
-    x = pair_spectrum(src, base_a, base_b, used, positions, weights, colours, fat_zero, lpf_rb, lpf_corr)
-    spectrum_to_lags(x, unfold_index, unfold_sign, corr, out)
 
 
 @ti.func

@@ -16,7 +16,7 @@ Layouts: ``scratch`` (slots * cams * U * 4, 8, 8) [slot, cam, used colour, q]; `
 import taichi as ti
 
 from tpnet_gpu.kernels.taichi_convert import (
-    axis_basis, camera_window, forward_colour, kernel_base, store_clt, window_featured, window_finite,
+    axis_basis, camera_window, forward_colour, kernel_base, store_clt, window_flags,
 )
 from tpnet_gpu.kernels.taichi_correlate import correlate_pair, tile_layers, zero_correlations
 from tpnet_gpu.kernels.taichi_types import F32_1D, F32_2D, F32_3D, F32_4D, I32_1D, I32_2D, U8_1D
@@ -40,8 +40,6 @@ def fused_tiles(
     centres: F32_3D,
     active: U8_1D,
     masks: F32_3D,
-    window_parts: F32_2D,
-    phase_parts: F32_3D,
     kernels: F32_3D,
     kernel_rows: ti.i32,
     kernel_cols: ti.i32,
@@ -95,10 +93,11 @@ def fused_tiles(
             all_inside = 1
             for cam in range(cams):
                 win = camera_window(centres, tile, cam, image_height, image_width, kernel_rows, kernel_cols)
-                all_finite *= win.finite * window_finite(padded, cam, win.oy, win.ox)
-                all_inside *= win.inside * window_featured(padded, cam, win.oy, win.ox)  # featureless: not valid
-                bx = axis_basis(win.sx, window_parts, phase_parts)
-                by = axis_basis(win.sy, window_parts, phase_parts)
+                flags = window_flags(padded, cam, win.oy, win.ox)
+                all_finite *= win.finite * flags[0]
+                all_inside *= win.inside * flags[1]  # featureless: not valid
+                bx = axis_basis(win.sx)
+                by = axis_basis(win.sy)
                 for u in range(n_used):
                     colour = used[u]
                     g = forward_colour(padded, cam, win.oy, win.ox, masks, win.parity * colours + colour, bx, by)

@@ -193,9 +193,7 @@ class Buffers:
         self.used_colours, self.used_weights = up(used, wp.int32), up(weights[used])  # (U,)
         self.used_positions = up(np.arange(len(used)), wp.int32)  # (U,): their places in the fused scratch
         self.all_colours = up(np.arange(geo.colours), wp.int32)  # (colours,): what the split convert writes
-        # Taichi: the forward basis by angle addition (2, 16), (2, 8, 16); the lag unfold as a gather (2, 15).
-        window_parts, phase_parts = operators.shifted_basis_parts()
-        self.basis_window, self.basis_phase = up(window_parts), up(phase_parts)
+        # Taichi: the lag unfold as a gather (2, 15) (the forward basis' shift-free parts are compile-time there).
         index, sign = operators.unfold_gather(CORR_RADIUS)
         self.unfold_index, self.unfold_sign = up(index, wp.int32), up(sign)
 

@@ -76,7 +76,7 @@ class TaichiBackend:
         """convert_tiles over the tiles of ``centres`` (the frame's, or one band's views)."""
         b, geo, v = self.b, self.geo, self._v
         taichi_convert.convert_tiles(
-            v(b.padded), v(centres), v(active), v(b.masks), v(b.basis_window), v(b.basis_phase), v(b.kernels),
+            v(b.padded), v(centres), v(active), v(b.masks), v(b.kernels),
             b.kernel_grid[0], b.kernel_grid[1], int(b.use_kernels), geo.height, geo.width, geo.colours,
             v(clt), v(finite), v(valid),
         )
@@ -84,8 +84,7 @@ class TaichiBackend:
     def _fused(self, masked: bool) -> None:
         b, geo, cfg, v = self.b, self.geo, self.config, self._v
         taichi_fused.fused_tiles(
-            v(b.padded), v(b.centres), v(b.active if masked else b.all_active), v(b.masks), v(b.basis_window),
-            v(b.basis_phase), v(b.kernels),
+            v(b.padded), v(b.centres), v(b.active if masked else b.all_active), v(b.masks), v(b.kernels),
             b.kernel_grid[0], b.kernel_grid[1], int(b.use_kernels), geo.height, geo.width, geo.colours,
             v(b.used_colours), v(b.used_positions), v(b.used_weights), v(b.pairs), cfg.fat_zero, v(b.lpf_rb),
             v(b.lpf_corr), v(b.unfold_index), v(b.unfold_sign), cfg.net_offset, b.layers is not None, v(b.tasks),
