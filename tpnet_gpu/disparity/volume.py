@@ -56,28 +56,51 @@ def _walk(cost: torch.Tensor, total: torch.Tensor, dxs: tuple[int, ...], p1: flo
     """Add to ``total`` the SGM path costs L(p, d) = C(p, d) + min(L(q, d), L(q, d +- 1) + p1, min L(q) + p2)
     - min L(q) of the directions (dy, dx) = (+-1, dx) for each dx in ``dxs``, q = p - (dy, dx); ``cost`` and
     ``total`` ``(H, W, D)``. All of them walk the rows together (the dy = -1 ones from the last row): one python
-    step per row, not per row and direction."""
+    step per row, not per row and direction.
+
+    Per row the minimum is taken at each predecessor q (its own column) and then moved to p = q + (dy, dx) as it
+    is added to the cost; a path entering the grid (first row, or the column a diagonal has no predecessor for)
+    starts at its cost. Every buffer and view is made once per walk and written in place (a 5 MPix volume's rows
+    are ~1 MB each: a new tensor per operation cost more in allocation than in arithmetic)."""
     height, width, bins = cost.shape
-    prev = cost.new_full((2, len(dxs), width, bins), float("inf"))  # (down|up, direction, W, D): L(q), inf = none
-    padded = cost.new_full((2, len(dxs), width, bins + 2), float("inf"))  # L(q) with inf beyond the bins
-    body = padded[..., 1:-1]
+    n = len(dxs)
+    lq = cost.new_full((2, n, width, bins + 2), float("inf"))  # (down|up, direction, W, D + 2): L(q), inf beyond
+    body = lq[..., 1:-1]  # the bins
+    best = cost.new_empty((2, n, width, bins))  # min(...) - min L(q), at q
+    low, high = cost.new_empty((2, n, width, 1)), cost.new_empty((2, n, width, 1))  # min L(q), min L(q) + p2
+    row_sum = cost.new_empty((width, bins))
+    moves = [[], []]  # per walk and direction: views of L(p) with a predecessor, of best there, of L(p) entered
+    for m, dx in enumerate(dxs):
+        inner = slice(max(dx, 0), width + min(dx, 0))
+        source = slice(max(-dx, 0), width - max(dx, 0))
+        entered = slice(0, dx) if dx > 0 else slice(width + dx, width)  # empty for dx = 0
+        for k in range(2):
+            moves[k].append((body[k, m, inner], best[k, m, source], inner, body[k, m, entered], entered))
     for i in range(height):
-        for n, dx in enumerate(dxs):  # L(q) at x - dx (the column that falls off stays inf: no predecessor)
-            if dx > 0:
-                body[:, n, 1:] = prev[:, n, :-1]
-            elif dx < 0:
-                body[:, n, :-1] = prev[:, n, 1:]
+        if i > 0:
+            torch.minimum(lq[..., 2:], lq[..., :-2], out=best)
+            best.add_(p1)
+            torch.minimum(best, body, out=best)
+            torch.amin(body, dim=-1, keepdim=True, out=low)
+            torch.minimum(best, torch.add(low, p2, out=high), out=best)
+            best.sub_(low)
+        for k, row in enumerate((i, height - 1 - i)):
+            c, into = cost[row], body[k]
+            if i == 0:
+                into.copy_(c.expand(n, -1, -1))
             else:
-                body[:, n] = prev[:, n]
-        low = body.amin(dim=-1, keepdim=True)
-        finite = torch.isfinite(low)
-        low = torch.where(finite, low, torch.zeros_like(low))
-        best = torch.minimum(torch.minimum(body, torch.minimum(padded[..., 2:], padded[..., :-2]) + p1), low + p2)
-        best = torch.where(finite, best - low, torch.zeros_like(best))
-        rows = (i, height - 1 - i)
-        prev = torch.stack((cost[rows[0]], cost[rows[1]]))[:, None] + best
-        total[rows[0]] += prev[0].sum(dim=0)
-        total[rows[1]] += prev[1].sum(dim=0)
+                for into_inner, best_source, inner, into_entered, entered in moves[k]:
+                    torch.add(c[inner], best_source, out=into_inner)
+                    into_entered.copy_(c[entered])
+            # the directions' sum in index order, as a sum over them would add them
+            out = total[row]
+            if n == 1:
+                out += into[0]
+            else:
+                torch.add(into[0], into[1], out=row_sum)
+                for m in range(2, n):
+                    row_sum += into[m]
+                out += row_sum
 
 
 def aggregate(cost: torch.Tensor, p1: float, p2: float) -> torch.Tensor:
