@@ -21,7 +21,7 @@ from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig
 from tpnet_gpu.disparity.measure import Measurer, row_chunks
 from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs, default_pairs
-from tpnet_gpu.disparity.volume import CostVolume, aggregate, pick
+from tpnet_gpu.disparity.volume import CostVolume
 from tpnet_gpu.processor import TileProcessor, validate
 
 # First stage: every SPARSE-th tile in each direction sweeps the whole range at full resolution. (Binned frames
@@ -184,7 +184,7 @@ class DisparityEngine:
         for target in targets:
             t = target if isinstance(target, torch.Tensor) else self._uniform.fill_(float(target))
             corr = self.measure_at(tp, t, active=active).corr
-            for part, rows in row_chunks(corr, tiles):
+            for part, rows in row_chunks(corr, tiles, self.measurer.rows):
                 combined = combine_pairs(self.sampler.sample(rows, self.offsets))
                 volume.add(t.reshape(-1).index_select(0, part), self.offsets, combined, self.config.reach, part)
 
@@ -205,7 +205,7 @@ class DisparityEngine:
         return tp.measure(**self._targets(tp, target), active=active)
 
     def _choose(self, volume: CostVolume) -> tuple[torch.Tensor, torch.Tensor]:
-        return pick(aggregate(volume.cost(), self.config.p1, self.config.p2), volume.disparities, volume.step)
+        return volume.choose(self.config.p1, self.config.p2)
 
     def _full_sweep(self) -> np.ndarray:
         """Uniform targets covering [d_min, d_max], each read within +-reach (2 px overlap between passes)."""

@@ -21,6 +21,10 @@ class CostVolume:
         self.bins = int(round((d_max - d_min) / step)) + 1
         self.values = torch.full((*grid, self.bins), float("-inf"), device=device)
         self.disparities = self.d_min + self.step * torch.arange(self.bins, device=device, dtype=torch.float32)
+        # the matching cost and its aggregation, made once: fresh volume-sized arrays (49 MB each at 5 MPix) are
+        # page-faulted in anew on every choice (glibc maps blocks over 32 MB per allocation)
+        self._cost = torch.empty_like(self.values)
+        self._total = torch.empty_like(self.values)
 
     def reset(self) -> None:
         """Every bin back to not measured (a new frame)."""
@@ -41,9 +45,14 @@ class CostVolume:
 
     def cost(self) -> torch.Tensor:
         """``(tiles_y, tiles_x, bins)`` matching cost 1 - correlation (clamped to [-1, 1]; 1 where not measured),
-        a new array made in place (one volume-sized array: the peak of a 5 MPix frame is in the engine's choice)."""
-        cost = torch.where(torch.isfinite(self.values), self.values, 0.0)
+        in the volume's own buffer (valid until the next ``cost`` or ``choose``)."""
+        cost = self._cost.copy_(self.values).masked_fill_(~torch.isfinite(self.values), 0.0)
         return cost.clamp_(-1, 1).neg_().add_(1.0)  # 1 - c, the same rounding
+
+    def choose(self, p1: float, p2: float) -> tuple[torch.Tensor, torch.Tensor]:
+        """``pick`` of the SGM aggregation (penalties ``p1``, ``p2``) of the cost: ``(disparity, margin)``
+        ``(tiles_y, tiles_x)`` each, with no volume-sized array made."""
+        return pick(aggregate(self.cost(), p1, p2, out=self._total), self.disparities, self.step, consume=True)
 
     def at(self, disparity: torch.Tensor) -> torch.Tensor:
         """The values ``(ty, tx)`` in the bins nearest to ``disparity (ty, tx)`` (NaN where not measured)."""
@@ -103,18 +112,21 @@ def _walk(cost: torch.Tensor, total: torch.Tensor, dxs: tuple[int, ...], p1: flo
                 out += row_sum
 
 
-def aggregate(cost: torch.Tensor, p1: float, p2: float) -> torch.Tensor:
+def aggregate(cost: torch.Tensor, p1: float, p2: float, out: torch.Tensor | None = None) -> torch.Tensor:
     """Sum ``(H, W, D)`` of the SGM path costs of ``cost (H, W, D)`` along the 8 grid directions: the 6 with a
-    vertical step walk the rows, the 2 horizontal ones the rows of the transposed grid."""
-    total = torch.zeros_like(cost)
+    vertical step walk the rows, the 2 horizontal ones the rows of the transposed grid (a view: each row of it is
+    W rows of D contiguous bins). Written into ``out`` when given (a buffer like ``cost``), else a new array."""
+    total = torch.zeros_like(cost) if out is None else out.zero_()
     _walk(cost, total, (-1, 0, 1), p1, p2)
-    _walk(cost.transpose(0, 1).contiguous(), total.transpose(0, 1), (0,), p1, p2)
+    _walk(cost.transpose(0, 1), total.transpose(0, 1), (0,), p1, p2)
     return total
 
 
-def pick(aggregated: torch.Tensor, disparities: torch.Tensor, step: float) -> tuple[torch.Tensor, torch.Tensor]:
+def pick(aggregated: torch.Tensor, disparities: torch.Tensor, step: float, *,
+         consume: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
     """Per tile the disparity of the lowest aggregated cost, refined by a parabola through it and its neighbours,
-    and the margin to the lowest cost more than 2 bins away (``(H, W)`` each; larger margin = surer choice)."""
+    and the margin to the lowest cost more than 2 bins away (``(H, W)`` each; larger margin = surer choice).
+    ``consume``: ``aggregated`` may be overwritten (its bins near the choice), saving a copy of it."""
     j = torch.argmin(aggregated, dim=-1, keepdim=True)
     bins = aggregated.shape[-1]
     c0 = torch.gather(aggregated, -1, j)
@@ -125,5 +137,6 @@ def pick(aggregated: torch.Tensor, disparities: torch.Tensor, step: float) -> tu
     d = disparities[j[..., 0]] + step * frac[..., 0].clamp(-0.5, 0.5)
     # the bins within 2 of the choice set to inf in one copy (not a volume of int64 distances)
     near = (j + torch.arange(-2, 3, device=aggregated.device)).clamp(0, bins - 1)  # (H, W, 5)
-    margin = aggregated.scatter(-1, near, float("inf")).amin(dim=-1) - c0[..., 0]
+    masked = aggregated.scatter_(-1, near, float("inf")) if consume else aggregated.scatter(-1, near, float("inf"))
+    margin = masked.amin(dim=-1) - c0[..., 0]
     return d, margin
