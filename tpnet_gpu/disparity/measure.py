@@ -91,6 +91,7 @@ class Measurer:
         device = sampler.vectors.device
         self.offsets = torch.arange(-reach, reach + 1e-6, 1.0, device=device)  # whole-pixel search
         self.rows = RowBuffer()  # the active tiles' correlations, a chunk at a time (also the engine's sweeps)
+        self.fine = sampler.table(self.offsets[:, None] + peak_window(device)[None, :])  # axis_peak's, per centre
 
     def measure(self, corr: torch.Tensor, active: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         tiles = corr.shape[0]
@@ -112,8 +113,9 @@ class Measurer:
         if self.widen:
             corr = gaussian_blur(corr, WIDEN_SIGMA)
         coarse = torch.nan_to_num(combine_pairs(self.sampler.sample(corr, self.offsets)), nan=-1.0)
-        centre = self.offsets[torch.argmax(coarse, dim=1)]  # (T,)
-        e, strength, ok = axis_peak(self.sampler, corr, centre)
+        k = torch.argmax(coarse, dim=1)  # (T,) each tile's whole-pixel centre
+        e, strength, ok = axis_peak(self.sampler, corr, self.offsets[k],
+                                    self.sampler.sample_rows(corr, self.fine, k, "bicubic"))
         if self.widen:
             strength = combine_pairs(self.sampler.sample(raw, e[:, None].nan_to_num(0.0), "bicubic"))[:, 0]
         return e, torch.where(ok, strength, torch.zeros_like(e))
@@ -126,13 +128,15 @@ def peak_window(device: torch.device) -> torch.Tensor:
     return PEAK_OFFSETS * torch.arange(-4, 5, device=device, dtype=torch.float32)
 
 
-def axis_peak(sampler: AxisSampler, corr: torch.Tensor, centre: torch.Tensor):
+def axis_peak(sampler: AxisSampler, corr: torch.Tensor, centre: torch.Tensor, samples: torch.Tensor | None = None):
     """The combined correlation's peak within +-1 px of ``centre (T,)`` (px along the pairs' axes): bicubic samples
     at quarter pixels (bilinear samples of a sharp peak pull the parabola toward whole lags), the best one, and a
     parabola through it and its neighbours. Returns ``(e (T,), value (T,), ok (T,))``; e NaN where the best
-    sample is at the window's end or no parabola vertex is a maximum."""
+    sample is at the window's end or no parabola vertex is a maximum. ``samples``: those bicubic samples
+    ``(T, P, 9)`` when the caller has them (``AxisSampler.sample_rows`` of a table of whole-pixel centres)."""
     fine = centre[:, None] + peak_window(corr.device)[None, :]  # (T, 9)
-    combined = torch.nan_to_num(combine_pairs(sampler.sample(corr, fine, "bicubic")), nan=-1.0)
+    samples = sampler.sample(corr, fine, "bicubic") if samples is None else samples
+    combined = torch.nan_to_num(combine_pairs(samples), nan=-1.0)
     j = torch.argmax(combined, dim=1, keepdim=True)
     n = combined.shape[1]
     c0 = torch.gather(combined, 1, j)
