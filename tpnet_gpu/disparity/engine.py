@@ -19,7 +19,7 @@ import torch
 
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig
-from tpnet_gpu.disparity.measure import Measurer, row_chunks
+from tpnet_gpu.disparity.measure import CHUNK, Measurer, row_chunks
 from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs, default_pairs
 from tpnet_gpu.disparity.volume import CostVolume
 from tpnet_gpu.processor import TileProcessor, validate
@@ -160,6 +160,7 @@ class DisparityEngine:
         self.grid = (self.tp.tiles_y, self.tp.tiles_x)
         self.sampler = AxisSampler(offsets, pairs, self.device)
         self.offsets = torch.arange(-7.0, 7.0 + 1e-6, OFFSETS_STEP, device=self.device)
+        self.sweep_grid = self.sampler.uniform(self.offsets, CHUNK)  # the sweeps' lags, made once
         self.measurer = Measurer(self.tp.pairs, self.sampler, config, widen=cfa is None)
         self.calibrated = not self.rig.is_ideal()
         self.sparse_tiles = torch.zeros(self.grid, dtype=torch.bool, device=self.device)
@@ -185,7 +186,7 @@ class DisparityEngine:
             t = target if isinstance(target, torch.Tensor) else self._uniform.fill_(float(target))
             corr = self.measure_at(tp, t, active=active).corr
             for part, rows in row_chunks(corr, tiles, self.measurer.rows):
-                combined = combine_pairs(self.sampler.sample(rows, self.offsets))
+                combined = combine_pairs(self.sampler.sample_uniform(rows, self.sweep_grid))
                 volume.add(t.reshape(-1).index_select(0, part), self.offsets, combined, self.config.reach, part)
 
     def _targets(self, tp: TileProcessor, target: torch.Tensor) -> dict:

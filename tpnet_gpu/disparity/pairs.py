@@ -91,6 +91,16 @@ class AxisSampler:
         ``sample_rows``."""
         return LagTable(*self._lag_terms(-e[:, None, :, None] * self.vectors[None, :, None, :], True))
 
+    def uniform(self, e: torch.Tensor, tiles: int) -> LagTable:
+        """The table of ``sample`` at offsets ``e (E,)`` for every tile of up to ``tiles`` at once: its grid
+        ``(tiles, P, E, 2)`` made whole once (``sample`` makes it per call), the divisors ``(1, P, E)``."""
+        grid, divisor = self._lag_terms(-e[None, None, :, None] * self.vectors[None, :, None, :], True)
+        return LagTable(grid.expand(tiles, -1, -1, -1).contiguous(), divisor)
+
+    def sample_uniform(self, corr: torch.Tensor, table: LagTable, mode: str = "bilinear") -> torch.Tensor:
+        """``sample(corr, e)`` for a table of ``uniform(e, tiles)`` (at most ``tiles`` tiles of ``corr``)."""
+        return self._read(corr, table.grid[: corr.shape[0]], table.divisor, mode)
+
     def sample_rows(self, corr: torch.Tensor, table: LagTable, rows: torch.Tensor, mode: str = "bilinear"):
         """``sample(corr, e)`` with each tile's offsets the row ``rows (T,)`` (int) of ``table``'s ``e (K, E)``: the
         same values, with the lags' geometry looked up instead of made per tile."""
