@@ -43,3 +43,18 @@ def test_parabola_step_is_the_vertex():
     values = [torch.tensor([-((x - x0) ** 2)]) for x in (-1.0, 0.0, 1.0)]
     step, ok = parabola_step(*values)
     assert ok.item() and step.item() == pytest.approx(x0, abs=1e-6)
+
+
+def test_row_chunks_into_a_buffer_are_the_named_rows():
+    """Oracle: plain indexing ``x[index]``; more rows than one chunk, so the buffer is reused between chunks."""
+    from tpnet_gpu.disparity.measure import CHUNK, RowBuffer, row_chunks
+
+    x = torch.arange(3 * CHUNK * 2, dtype=torch.float32).view(3 * CHUNK, 2)
+    index = torch.arange(1, 3 * CHUNK, 2)  # every other row: copies
+    buffer = RowBuffer()
+    seen = []
+    for part, rows in row_chunks(x, index, buffer):
+        assert torch.equal(rows, x[part])
+        seen.append(part)
+    assert torch.equal(torch.cat(seen), index) and len(seen) == 2
+    assert buffer.rows(x, 1).data_ptr() == buffer.rows(x, 5).data_ptr()  # one buffer

@@ -123,3 +123,29 @@ def test_direction_groups_reject_bad_pairs():
         direction_groups(((-0.5, 0.0), (0.5, 0.0)), [(0, 2)])
     with pytest.raises(ValueError, match="pairs: a pair of cameras at the same offset has no lag direction"):
         direction_groups(((0.0, 0.0), (0.0, 0.0)), [(0, 1)])
+
+
+@pytest.mark.parametrize("offsets, pairs", [
+    (tables.QUAD_OFFSETS, tables.QUAD_PAIRS),
+    (((-1.5, 0.0), (1.5, 0.0), (-0.5, 0.0)), ((0, 1), (2, 1))),  # |v| = 3 and 2: lags fall outside
+])
+def test_table_reads_are_the_per_tile_reads(offsets, pairs):
+    """Oracle: a Gaussian peak at a known offset (1.75 px) found at its offset by the table reads, and the table
+    reads (``uniform``: one grid for every tile; ``table`` + ``sample_rows``: a row of offsets per tile) bitwise
+    equal to ``sample`` with each tile's offsets made per call (the path the peak tests above check)."""
+    sampler = AxisSampler(offsets, pairs, "cpu")
+    peak = gaussian_peaks(pair_vectors(offsets, pairs), 1.75)
+    corr = torch.cat([peak, torch.rand(4, len(pairs), 15, 15, generator=torch.Generator().manual_seed(0))])
+    e = torch.arange(-3.0, 3.01, 0.25)
+    got = sampler.sample_uniform(corr, sampler.uniform(e, 8), "bicubic")
+    want = sampler.sample(corr, e, "bicubic")
+    assert torch.equal(got.isnan(), want.isnan()) and torch.equal(got.nan_to_num(), want.nan_to_num())
+    bilinear = sampler.sample_uniform(corr, sampler.uniform(e, 8))
+    assert torch.equal(bilinear.nan_to_num(), sampler.sample(corr, e).nan_to_num())
+    assert float(e[torch.argmax(combine_pairs(got)[0])]) == pytest.approx(1.75)
+    rows = e[:, None] + torch.arange(-1.0, 1.01, 0.25)[None, :]  # (K, 9) like the measurer's fine windows
+    pick = torch.tensor([19, 3, 0, 14, 19])  # row 19: 1.75 + (-1 .. 1) for the peak's tile
+    got = sampler.sample_rows(corr, sampler.table(rows), pick, "bicubic")
+    want = sampler.sample(corr, rows[pick], "bicubic")
+    assert torch.equal(got.isnan(), want.isnan()) and torch.equal(got.nan_to_num(), want.nan_to_num())
+    assert float(rows[19][torch.argmax(combine_pairs(got)[0])]) == pytest.approx(1.75)

@@ -86,3 +86,18 @@ def test_volume_add_keeps_the_stronger_sample():
     volume.add(torch.tensor([0.0, float("nan")]), offsets, torch.tensor([[0.7, 0.8, float("nan")], [1.0] * 3]),
                reach=1.0, tiles=torch.tensor([1, 0]))
     assert torch.allclose(v[1, :2], torch.tensor([0.8, 0.3])) and torch.allclose(v[0, :4], torch.tensor([0.1, 0.9, 0.2, 0.0]))
+
+
+def test_choose_is_pick_of_the_aggregation_without_changing_the_volume():
+    """Oracle: a measured plane at bin 8 (disparity 4 px) with one corrupted tile: ``choose`` gives the plane
+    everywhere, bitwise what ``pick(aggregate(cost))`` gives, and leaves the measured values as they were."""
+    volume = CostVolume((9, 11), 0.0, 10.0, 0.5, "cpu")
+    values = 1.0 - plane_costs(bins=volume.bins)
+    values[4, 5, 17] = 1.0  # a false, sharp maximum
+    values[:, :, -1] = float("-inf")  # not measured
+    volume.values.copy_(values)
+    d, margin = volume.choose(0.05, 0.3)
+    want_d, want_margin = pick(aggregate(volume.cost(), 0.05, 0.3), volume.disparities, volume.step)
+    assert torch.equal(d, want_d) and torch.equal(margin, want_margin)
+    assert torch.allclose(d, torch.full_like(d, 4.0), atol=0.03)
+    assert torch.equal(volume.values, values)

@@ -21,10 +21,10 @@ import torch
 
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig
-from tpnet_gpu.disparity.measure import Measurer, row_chunks
+from tpnet_gpu.disparity.measure import CHUNK, Measurer, row_chunks
 from tpnet_gpu.disparity.occlusion import Occlusion, lowest
 from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs, default_pairs
-from tpnet_gpu.disparity.volume import CostVolume, aggregate, pick
+from tpnet_gpu.disparity.volume import CostVolume
 from tpnet_gpu.processor import TileProcessor, validate
 
 # First stage: every SPARSE-th tile in each direction sweeps the whole range at full resolution. (Binned frames
@@ -177,6 +177,7 @@ class DisparityEngine:
         self.grid = (self.tp.tiles_y, self.tp.tiles_x)
         self.sampler = AxisSampler(offsets, pairs, self.device)
         self.offsets = torch.arange(-7.0, 7.0 + 1e-6, OFFSETS_STEP, device=self.device)
+        self.sweep_grid = self.sampler.uniform(self.offsets, CHUNK)  # the sweeps' lags, made once
         self.measurer = Measurer(self.tp.pairs, self.sampler, config, widen=cfa is None)
         self.calibrated = not self.rig.is_ideal()
         self.sparse_tiles = torch.zeros(self.grid, dtype=torch.bool, device=self.device)
@@ -203,8 +204,8 @@ class DisparityEngine:
         for target in targets:
             t = target if isinstance(target, torch.Tensor) else self._uniform.fill_(float(target))
             corr = self.measure_at(tp, t, active=active).corr
-            for part, rows in row_chunks(corr, tiles):
-                combined = combine_pairs(self.sampler.sample(rows, self.offsets))
+            for part, rows in row_chunks(corr, tiles, self.measurer.rows):
+                combined = combine_pairs(self.sampler.sample_uniform(rows, self.sweep_grid))
                 volume.add(t.reshape(-1).index_select(0, part), self.offsets, combined, self.config.reach, part)
 
     def _targets(self, tp: TileProcessor, target: torch.Tensor) -> dict:
@@ -224,7 +225,7 @@ class DisparityEngine:
         return tp.measure(**self._targets(tp, target), active=active)
 
     def _choose(self, volume: CostVolume) -> tuple[torch.Tensor, torch.Tensor]:
-        return pick(aggregate(volume.cost(), self.config.p1, self.config.p2), volume.disparities, volume.step)
+        return volume.choose(self.config.p1, self.config.p2)
 
     def _full_sweep(self) -> np.ndarray:
         """Uniform targets covering [d_min, d_max], each read within +-reach (2 px overlap between passes)."""
@@ -281,7 +282,7 @@ class DisparityEngine:
         corr = self.measure_at(self.tp, target, active=tried.reshape(found.shape)).corr
         share = tiles.numel() / found.numel()
         done = 0  # the chunks are consecutive runs of ``tiles``: their rows of ``visible`` follow on
-        for part, rows in row_chunks(corr, tiles):
+        for part, rows in row_chunks(corr, tiles, self.measurer.rows):
             seen = visible[done: done + part.numel()]
             done += part.numel()
             values = self.sampler.sample(rows, self.unhidden_offsets)  # (T, P, E)

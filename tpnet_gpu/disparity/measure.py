@@ -28,12 +28,34 @@ PEAK_OFFSETS = 0.25  # px between the offsets the generic peak is read at
 CHUNK = 8192
 
 
-def row_chunks(x: torch.Tensor, index: torch.Tensor):
+class RowBuffer:
+    """A ``(CHUNK, ...)`` buffer that ``row_chunks`` copies rows into, made on first use and remade only for rows of
+    another shape, dtype or device: a copy into a fresh 44 MB chunk (5 MPix, 8192 tiles of quad correlations) is
+    page-faulted in anew each time (glibc maps blocks over 32 MB per allocation), which cost ~6x the copy itself."""
+
+    def __init__(self):
+        self._buffer = None
+
+    def rows(self, x: torch.Tensor, n: int) -> torch.Tensor:
+        """``(n, *x.shape[1:])``: the first ``n`` rows of the buffer (n <= CHUNK), valid until the next call."""
+        b = self._buffer
+        if b is None or b.shape[1:] != x.shape[1:] or b.dtype != x.dtype or b.device != x.device:
+            b = self._buffer = x.new_empty((CHUNK, *x.shape[1:]))
+        return b[:n]
+
+
+def row_chunks(x: torch.Tensor, index: torch.Tensor, buffer: RowBuffer | None = None):
     """``(part, rows)`` for each CHUNK of ``index`` ``(N,)``: the rows of ``x`` it names - views when ``index``
-    is every row in order (a full pass: no copy of its correlations), copies otherwise."""
+    is every row in order (a full pass: no copy of its correlations), copies otherwise (into ``buffer`` when
+    given: each chunk's rows are then valid only until the next chunk)."""
     everything = index.numel() == x.shape[0]  # nonzero / arange give every row in order then
     for start, part in zip(range(0, index.numel(), CHUNK), index.split(CHUNK)):
-        yield part, x.narrow(0, start, part.numel()) if everything else x.index_select(0, part)
+        if everything:
+            yield part, x.narrow(0, start, part.numel())
+        elif buffer is None:
+            yield part, x.index_select(0, part)
+        else:
+            yield part, torch.index_select(x, 0, part, out=buffer.rows(x, part.numel()))
 
 
 WIDEN_SIGMA = 0.9  # px: Gaussian blur of mono correlations before the peak is located
@@ -68,12 +90,14 @@ class Measurer:
         reach = min(sampler.reach, config.trust + 1.0)
         device = sampler.vectors.device
         self.offsets = torch.arange(-reach, reach + 1e-6, 1.0, device=device)  # whole-pixel search
+        self.rows = RowBuffer()  # the active tiles' correlations, a chunk at a time (also the engine's sweeps)
+        self.fine = sampler.table(self.offsets[:, None] + peak_window(device)[None, :])  # axis_peak's, per centre
 
     def measure(self, corr: torch.Tensor, active: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         tiles = corr.shape[0]
         residual = torch.full((tiles,), float("nan"), device=corr.device)
         strength = torch.zeros((tiles,), device=corr.device)
-        for index, sub in row_chunks(corr, torch.nonzero(active, as_tuple=True)[0]):  # bounded temporaries
+        for index, sub in row_chunks(corr, torch.nonzero(active, as_tuple=True)[0], self.rows):  # bounded
             if self.lma:  # the LMA runs in float64 NumPy (a host round trip of the active tiles)
                 m = lma_measure(sub.detach().cpu().numpy(), self.params)
                 d = torch.as_tensor(m.residual, dtype=torch.float32, device=corr.device)
@@ -89,8 +113,9 @@ class Measurer:
         if self.widen:
             corr = gaussian_blur(corr, WIDEN_SIGMA)
         coarse = torch.nan_to_num(combine_pairs(self.sampler.sample(corr, self.offsets)), nan=-1.0)
-        centre = self.offsets[torch.argmax(coarse, dim=1)]  # (T,)
-        e, strength, ok = axis_peak(self.sampler, corr, centre)
+        k = torch.argmax(coarse, dim=1)  # (T,) each tile's whole-pixel centre
+        e, strength, ok = axis_peak(self.sampler, corr, self.offsets[k],
+                                    self.sampler.sample_rows(corr, self.fine, k, "bicubic"))
         if self.widen:
             strength = combine_pairs(self.sampler.sample(raw, e[:, None].nan_to_num(0.0), "bicubic"))[:, 0]
         return e, torch.where(ok, strength, torch.zeros_like(e))
@@ -103,13 +128,15 @@ def peak_window(device: torch.device) -> torch.Tensor:
     return PEAK_OFFSETS * torch.arange(-4, 5, device=device, dtype=torch.float32)
 
 
-def axis_peak(sampler: AxisSampler, corr: torch.Tensor, centre: torch.Tensor):
+def axis_peak(sampler: AxisSampler, corr: torch.Tensor, centre: torch.Tensor, samples: torch.Tensor | None = None):
     """The combined correlation's peak within +-1 px of ``centre (T,)`` (px along the pairs' axes): bicubic samples
     at quarter pixels (bilinear samples of a sharp peak pull the parabola toward whole lags), the best one, and a
     parabola through it and its neighbours. Returns ``(e (T,), value (T,), ok (T,))``; e NaN where the best
-    sample is at the window's end or no parabola vertex is a maximum."""
+    sample is at the window's end or no parabola vertex is a maximum. ``samples``: those bicubic samples
+    ``(T, P, 9)`` when the caller has them (``AxisSampler.sample_rows`` of a table of whole-pixel centres)."""
     fine = centre[:, None] + peak_window(corr.device)[None, :]  # (T, 9)
-    combined = torch.nan_to_num(combine_pairs(sampler.sample(corr, fine, "bicubic")), nan=-1.0)
+    samples = sampler.sample(corr, fine, "bicubic") if samples is None else samples
+    combined = torch.nan_to_num(combine_pairs(samples), nan=-1.0)
     j = torch.argmax(combined, dim=1, keepdim=True)
     n = combined.shape[1]
     c0 = torch.gather(combined, 1, j)

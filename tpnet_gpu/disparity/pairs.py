@@ -83,14 +83,55 @@ class AxisSampler:
         lag = -e[:, None, :, None] * vectors[None, :, None, :]  # (T|1, P, E, 2)
         if origin is not None:
             lag = lag + origin[:, :, None, :]
-        grid = (lag.expand(tiles, -1, -1, -1) / CORR_RADIUS).reshape(tiles * npairs, 1, -1, 2)
-        values = F.grid_sample(corr.reshape(tiles * npairs, 1, 2 * CORR_RADIUS + 1, 2 * CORR_RADIUS + 1).float(),
-                               grid, mode=mode, padding_mode="zeros", align_corners=True)
-        values = values.reshape(tiles, npairs, -1)
-        if normalise:
-            values = values / (self._overlap(lag[..., 0]) * self._overlap(lag[..., 1])).clamp(min=0.05)
+        grid, divisor = self._lag_terms(lag, normalise)
+        return self._read(corr, grid.expand(tiles, -1, -1, -1), divisor, mode)
+
+    def table(self, e: torch.Tensor) -> LagTable:
+        """The grid and divisors of ``sample`` at each row of offsets ``e (K, E)`` (px), made once, for
+        ``sample_rows``."""
+        return LagTable(*self._lag_terms(-e[:, None, :, None] * self.vectors[None, :, None, :], True))
+
+    def uniform(self, e: torch.Tensor, tiles: int) -> LagTable:
+        """The table of ``sample`` at offsets ``e (E,)`` for every tile of up to ``tiles`` at once: its grid
+        ``(tiles, P, E, 2)`` made whole once (``sample`` makes it per call), the divisors ``(1, P, E)``."""
+        grid, divisor = self._lag_terms(-e[None, None, :, None] * self.vectors[None, :, None, :], True)
+        return LagTable(grid.expand(tiles, -1, -1, -1).contiguous(), divisor)
+
+    def sample_uniform(self, corr: torch.Tensor, table: LagTable, mode: str = "bilinear") -> torch.Tensor:
+        """``sample(corr, e)`` for a table of ``uniform(e, tiles)`` (at most ``tiles`` tiles of ``corr``)."""
+        return self._read(corr, table.grid[: corr.shape[0]], table.divisor, mode)
+
+    def sample_rows(self, corr: torch.Tensor, table: LagTable, rows: torch.Tensor, mode: str = "bilinear"):
+        """``sample(corr, e)`` with each tile's offsets the row ``rows (T,)`` (int) of ``table``'s ``e (K, E)``: the
+        same values, with the lags' geometry looked up instead of made per tile."""
+        return self._read(corr, table.grid.index_select(0, rows), table.divisor.index_select(0, rows), mode)
+
+    def _lag_terms(self, lag: torch.Tensor, normalise: bool) -> tuple[torch.Tensor, torch.Tensor]:
+        """grid_sample's coordinates of lags ``(..., P, E, 2)`` and the divisors ``(..., P, E)`` of the samples:
+        the windows' overlap there (1 without ``normalise``), NaN where the lag falls outside +-7 (one in-place
+        division then divides and masks: x / 1 = x exactly)."""
+        divisor = (self._overlap(lag[..., 0]) * self._overlap(lag[..., 1])).clamp(min=0.05) if normalise else \
+            torch.ones_like(lag[..., 0])
         inside = (lag.abs() <= CORR_RADIUS + 1e-4).all(dim=-1)
-        return torch.where(inside, values, torch.full_like(values, float("nan")))
+        return lag / CORR_RADIUS, torch.where(inside, divisor, torch.full_like(divisor, float("nan")))
+
+    @staticmethod
+    def _read(corr: torch.Tensor, grid: torch.Tensor, divisor: torch.Tensor, mode: str) -> torch.Tensor:
+        """``(T, P, E)`` samples of ``corr (T, P, 15, 15)`` at ``grid (T, P, E, 2)`` over ``divisor (T|1, P, E)``."""
+        tiles, npairs = corr.shape[:2]
+        side = 2 * CORR_RADIUS + 1
+        values = F.grid_sample(corr.reshape(tiles * npairs, 1, side, side).float(),
+                               grid.reshape(tiles * npairs, 1, -1, 2), mode=mode, padding_mode="zeros",
+                               align_corners=True)
+        return values.reshape(tiles, npairs, -1).div_(divisor)
+
+
+class LagTable(NamedTuple):
+    """``AxisSampler.table``: per row of offsets, grid_sample's coordinates ``(K, P, E, 2)`` and the samples'
+    divisors ``(K, P, E)`` (NaN outside +-7)."""
+
+    grid: torch.Tensor
+    divisor: torch.Tensor
 
 
 # Offset of the geometric mean over pairs: small, so a candidate one pair direction disagrees with is suppressed
