@@ -191,8 +191,10 @@ class DisparityEngine:
         self.volume = CostVolume(self.grid, lo, hi, config.bin_step, self.device)
         self._uniform = torch.zeros(self.grid, device=self.device)  # a sweep pass's uniform target
         self.sparse_volume = CostVolume(self.sparse_grid, lo, hi, config.bin_step, self.device)
-        self.occlusion = Occlusion(offsets, self.tp.pairs, OCCLUSION_JUMP, self.d_max - config.d_min)
+        self.occlusion = Occlusion(offsets, self.tp.pairs, OCCLUSION_JUMP, self.d_max - config.d_min,
+                                   self.device)
         self.unhidden_offsets = torch.arange(-UNHIDDEN_READ, UNHIDDEN_READ + 1e-6, OFFSETS_STEP, device=self.device)
+        self.unhidden_grid = self.sampler.uniform(self.unhidden_offsets, CHUNK)  # its lags, made once
 
     # --- first stage ---------------------------------------------------------------------------------------
     def _sweep(self, tp: TileProcessor, targets, volume: CostVolume, active=None) -> None:
@@ -285,7 +287,7 @@ class DisparityEngine:
         for part, rows in row_chunks(corr, tiles, self.measurer.rows):
             seen = visible[done: done + part.numel()]
             done += part.numel()
-            values = self.sampler.sample(rows, self.unhidden_offsets)  # (T, P, E)
+            values = self.sampler.sample_uniform(rows, self.unhidden_grid)  # (T, P, E)
             combined = combine_pairs(torch.where(seen[:, :, None], values, torch.full_like(values, float("nan"))))
             volume.add(background.reshape(-1).index_select(0, part), self.unhidden_offsets, combined,
                        self.config.reach, part)

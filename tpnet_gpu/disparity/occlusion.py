@@ -13,11 +13,10 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from tpnet_gpu.layout import TILE_SIZE
+from tpnet_gpu.layout import HALF_TILE, TILE_STRIDE
 
-TILE_STRIDE = TILE_SIZE // 2  # px between tile centres
 # A nearer tile hides the window when its centre lands within half a window of the window's centre.
-OCCLUDER_REACH = TILE_SIZE / 2
+OCCLUDER_REACH = HALF_TILE
 
 
 def lowest(disparity: torch.Tensor, radius: int) -> torch.Tensor:
@@ -28,15 +27,16 @@ def lowest(disparity: torch.Tensor, radius: int) -> torch.Tensor:
 
 class Occlusion:
     """Occlusion of tiles by nearer tiles of a disparity map, for a rig's camera ``offsets (cams, 2)`` and
-    ``pairs (P, 2)``, nearer meaning more than ``jump`` px nearer, over disparity differences up to ``span`` px.
+    ``pairs (P, 2)``, nearer meaning more than ``jump`` px nearer, over disparity differences up to ``span`` px;
+    the pair table lives on ``device`` (the maps' device: no copy per frame).
 
     The tile offsets a camera can be hidden from are fixed by the rig: they lie along -r_i (a nearer surface
     shows displaced by -D r_i), so each camera keeps only those (host work once, here)."""
 
-    def __init__(self, offsets, pairs, jump: float, span: float):
+    def __init__(self, offsets, pairs, jump: float, span: float, device=None):
         r = np.asarray(offsets, dtype=np.float64)
         self.jump = float(jump)
-        self.pairs = torch.as_tensor(np.asarray(pairs, dtype=np.int64))
+        self.pairs = torch.as_tensor(np.asarray(pairs, dtype=np.int64), device=device)
         self.radius = int(np.ceil(np.abs(r).max() * max(span, 0.0) / TILE_STRIDE)) + 1
         rel = np.linspace(self.jump, max(span, self.jump), 64)
         self.reach: list[list[tuple[int, int]]] = []  # per camera: (dy, dx) tile offsets an occluder can sit at
@@ -67,5 +67,4 @@ class Occlusion:
 
     def visible_pairs(self, hidden: torch.Tensor) -> torch.Tensor:
         """``(N, P)`` bool: pairs neither of whose cameras is ``hidden (N, cams)``."""
-        pairs = self.pairs.to(hidden.device)
-        return ~(hidden[..., pairs[:, 0]] | hidden[..., pairs[:, 1]])
+        return ~(hidden[..., self.pairs[:, 0]] | hidden[..., self.pairs[:, 1]])
