@@ -3,14 +3,15 @@ the CLT buffer (tile_processor.md §1.4, §3-§6; network.md §1).
 
 Two loops in one launch. First a task list: the indices of the active tiles, compacted with an atomic counter
 (their order varies between runs; every tile's results are its own, so the outputs do not); inactive tiles get
-their outputs cleared there (finite and valid 0, correlations and layers zero). Then per worker ``slot`` (a CPU
+their outputs cleared there (finite and valid 0, correlations and layers zero), the correlations and layers only
+where ``written`` / ``layers_written`` say an earlier pass left some (kernels/fused.py). Then per worker ``slot`` (a CPU
 task or a GPU thread) every slots-th task of the list: per tile every camera's window is converted (only the
 colours the correlation uses, ``used``) into the slot's own few-KB scratch, which stays in cache, and every pair
 is correlated from there (the same ``ti.func``s as the split kernels, kernels/taichi_convert.py and
 kernels/taichi_correlate.py).
 
 Layouts: ``scratch`` (slots * cams * U * 4, 8, 8) [slot, cam, used colour, q]; ``tasks`` (tiles,) int32;
-``count`` (1,) int32; the rest as the split kernels.
+``count`` (1,) int32; ``written``, ``layers_written`` (tiles,) uint8; the rest as the split kernels.
 """
 
 import taichi as ti
@@ -24,14 +25,19 @@ from tpnet_gpu.layout import NET_LAYERS, NET_SIDE
 
 
 @ti.func
+def clear_layers(tile: ti.i32, layers: ti.template()):
+    for layer in range(NET_LAYERS):
+        for row in range(NET_SIDE):
+            for col in range(NET_SIDE):
+                layers[tile, layer, row, col] = 0.0
+
+
+@ti.func
 def clear_tile(tile: ti.i32, npairs: ti.i32, corr: ti.template(), layers: ti.template(), with_layers: ti.template()):
-    """Zero correlations (and layers) of a tile that is inactive or has non-finite input."""
+    """Zero correlations (and layers) of a tile that has non-finite input."""
     zero_correlations(corr, tile * npairs, npairs)
     if ti.static(with_layers):
-        for layer in range(NET_LAYERS):
-            for row in range(NET_SIDE):
-                for col in range(NET_SIDE):
-                    layers[tile, layer, row, col] = 0.0
+        clear_layers(tile, layers)
 
 
 @ti.kernel
@@ -65,11 +71,13 @@ def fused_tiles(
     layers: F32_4D,
     finite: U8_1D,
     valid: U8_1D,
+    written: U8_1D,
+    layers_written: U8_1D,
 ):
     """Arguments as the split kernels (convert_tiles, correlate_tiles); used/positions/weights (U,): the used
     colours, their places in the scratch (0..U-1) and weights; with_layers (compile time): write the quad's
     network layers (else ``layers`` is not touched). Outputs: corr, layers, finite, valid; tasks and count are
-    the task list."""
+    the task list; written / layers_written: which tiles' correlations / layers may be non-zero (read, updated)."""
     tiles = centres.shape[0]
     cams = centres.shape[1]
     npairs = pairs.shape[0]
@@ -80,10 +88,19 @@ def fused_tiles(
     for tile in range(tiles):
         if active[tile] != 0:
             tasks[ti.atomic_add(count[0], 1)] = tile
+            written[tile] = ti.u8(1)
+            if ti.static(with_layers):
+                layers_written[tile] = ti.u8(1)
         else:
             finite[tile] = ti.u8(0)
             valid[tile] = ti.u8(0)
-            clear_tile(tile, npairs, corr, layers, with_layers)
+            if written[tile] != 0:
+                written[tile] = ti.u8(0)
+                zero_correlations(corr, tile * npairs, npairs)
+            if ti.static(with_layers):
+                if layers_written[tile] != 0:
+                    layers_written[tile] = ti.u8(0)
+                    clear_layers(tile, layers)
     n = count[0]
     for slot in range(slots):
         i = slot

@@ -74,6 +74,28 @@ def test_active_mask_skips_tiles(device, backend, keep_clt, frames):
     np.testing.assert_array_equal(out.valid.cpu().numpy().reshape(active.shape), active)
 
 
+def test_inactive_tiles_are_zero_after_earlier_passes_wrote_them(device, backend, keep_clt, frames):
+    # Oracle: the documented contract (inactive tiles: zero correlations and layers, not valid) and a fresh
+    # processor's pass with the same mask and no earlier pass. The fused pass zeroes only the tiles an earlier
+    # pass wrote: checked to fail with the mark of an active tile as written left out (stale correlations).
+    tp = TileProcessor(H, W, clt=keep_clt, device=device, backend=backend)
+    tp.load(frames)
+    tp.measure(0.5)  # every tile written
+    first = np.zeros((H // 8, W // 8), dtype=bool)
+    first[1:3, 1:4] = True
+    second = np.zeros_like(first)
+    second[0, :] = second[:, 0] = True
+    for mask in (first, second, np.zeros_like(first), first):
+        out = tp.measure(0.5, active=mask)
+        fresh = TileProcessor(H, W, clt=keep_clt, device=device, backend=backend).process(frames, 0.5, active=mask)
+        corr, layers = out.corr.cpu().reshape(*mask.shape, -1), out.layers.cpu().reshape(*mask.shape, -1)
+        assert not corr[torch.from_numpy(~mask)].any() and not layers[torch.from_numpy(~mask)].any()
+        torch.testing.assert_close(out.corr, fresh.corr, rtol=0, atol=0)
+        torch.testing.assert_close(out.layers, fresh.layers, rtol=0, atol=0)
+        valid = out.valid.cpu().numpy().reshape(mask.shape)
+        assert not valid[~mask].any() and np.array_equal(valid, fresh.valid.cpu().numpy().reshape(mask.shape))
+
+
 def test_two_threads_do_not_crash(frames, backend):
     # Warp CPU tile kernels abort when launched concurrently (platform.md §1); Taichi has one runtime per
     # process. The processor serialises the launches of either backend.

@@ -102,7 +102,8 @@ class Buffers:
     ``disparity`` (tiles_y, tiles_x); ``centres`` (tiles, cams, 2); ``active``, ``all_active``, ``finite``,
     ``valid`` (tiles,) bool; ``clt`` (tiles * cams * colours * 4, 8, 8) or None (``keep_clt`` False); ``corr``
     (tiles * pairs, 15, 15); ``layers`` (tiles, 4, 9, 9) or None; the fused pass's ``tasks`` (tiles,) int32,
-    ``count`` (1,) int32 and ``scratch`` (slots * cams * U * 4, 8, 8) (``allocate_fused``; U: the used colours).
+    ``count`` (1,) int32, ``written`` and ``layers_written`` (tiles,) bool and ``scratch`` (slots * cams * U * 4,
+    8, 8) (``allocate_fused``; U: the used colours).
     Texture (``textures=True``): ``tex_rgba`` (ring_rows * tiles_x * (colours + 1), 16, 16) per-tile
     contributions of ``texture_ring_rows`` tile rows, ``canvas`` (colours + 1, H + 8, W + 8), the scratch of one
     band of ``TEXTURE_BAND_ROWS`` tile rows (span = ``texture_band_tiles``): ``tex_pix``, ``tex_cmp`` (span * cams
@@ -130,6 +131,10 @@ class Buffers:
         self.layers = zeros((tiles, NET_LAYERS, NET_SIDE, NET_SIDE)) if geo.pairs == tables.QUAD_PAIRS else None
         self.tasks = wp.zeros(tiles, dtype=wp.int32, device=device)
         self.count = wp.zeros(1, dtype=wp.int32, device=device)
+        # tiles whose correlations (layers) an earlier pass may have left non-zero: the fused pass clears only
+        # those of its inactive tiles, so a sparse pass costs its share of the tiles
+        self.written = wp.zeros(tiles, dtype=wp.bool, device=device)
+        self.layers_written = wp.zeros(tiles, dtype=wp.bool, device=device)
         self.scratch = None
         self._tables(geo, config, kernels)
         texture_view = None if texture_config is None else self._texture(geo, texture_config)

@@ -89,7 +89,8 @@ class TaichiBackend:
             v(b.used_colours), v(b.used_positions), v(b.used_weights), v(b.pairs), cfg.fat_zero, v(b.lpf_rb),
             v(b.lpf_corr), v(b.unfold_index), v(b.unfold_sign), cfg.net_offset, b.layers is not None, v(b.tasks),
             v(b.count), v(b.scratch), v(b.corr),
-            self.no_layers if b.layers is None else v(b.layers), v(b.finite), v(b.valid),
+            self.no_layers if b.layers is None else v(b.layers), v(b.finite), v(b.valid), v(b.written),
+            v(b.layers_written),
         )
 
     def _correlate(self) -> None:
@@ -98,8 +99,10 @@ class TaichiBackend:
             v(b.clt), v(b.finite), v(b.pairs), geo.cams, geo.colours, v(b.used_colours), v(b.used_weights),
             cfg.fat_zero, v(b.lpf_rb), v(b.lpf_corr), v(b.unfold_index), v(b.unfold_sign), v(b.corr),
         )
+        v(b.written).fill_(1)  # every tile's correlations (layers) were written, zero where not finite
         if b.layers is not None:
             taichi_correlate.network_layers(v(b.corr), cfg.net_offset, v(b.layers))
+            v(b.layers_written).fill_(1)
 
     def _convert_texture(self, masked: bool) -> None:
         self._texture(convert=True, masked=masked)

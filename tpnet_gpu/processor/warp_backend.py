@@ -135,6 +135,7 @@ class WarpBackend:
              b.lpf_rb, b.lpf_corr, b.lags_cos, b.lags_sin, b.freqs_cos, b.freqs_sin],
             [b.corr],
         )
+        b.written.fill_(True)  # every tile's correlations were written (zero where not finite)
         self._layers()
 
     def _layers(self) -> None:
@@ -147,7 +148,7 @@ class WarpBackend:
         b, geo, cfg = self.b, self.geo, self.config
         self._thread_launch(fused.reset_count, 1, [], [b.count])
         self._thread_launch(fused.compact_tasks, geo.tiles, [b.active if masked else b.all_active, len(geo.pairs)],
-                            [b.tasks, b.count, b.finite, b.valid, b.corr])
+                            [b.tasks, b.count, b.finite, b.valid, b.corr, b.written])
         wp.launch_tiled(
             fused.fused_tiles, dim=[self.slots],
             inputs=[b.tasks, b.count, self.slots, b.padded, b.centres, b.masks, b.k_rows, b.n_rows, b.n_cols,
