@@ -142,7 +142,8 @@ def test_bench_network(tmp_path, capsys):
     argv = ["--scenes", "1", "--passes", "1", "--height", "64", "--width", "64", "--png", str(png or "")]
     report, out, err = run_bench(bench_network, argv, tmp_path, capsys)
     assert ACCURACY_KEYS | {"passes"} <= set(report)
-    assert list(report["stats"]) == ["old sweep + LMA", "engine", "engine (LMA)", "TPNET (1 pass)"]
+    assert list(report["stats"]) == ["old sweep + LMA", "engine", "engine (LMA)", "TPNET (1 pass, no context)",
+                                     "TPNET (1 pass)"]
     _check_accuracy(report, {"old sweep + LMA", "engine", "engine (LMA)"})
     passes = report["per_frame"]
     assert passes["old sweep + LMA"]["tile_passes"] >= 8 and passes["engine"]["tile_passes"] > 0  # budget: engine tests
@@ -160,7 +161,8 @@ def test_bench_network_binocular(tmp_path, capsys):
     argv = ["--scenes", "1", "--passes", "1", "--height", "64", "--width", "64", "--png", "", "--rig", "binocular",
             "--weights", str(weights)]
     report, out, err = run_bench(bench_network, argv, tmp_path, capsys)
-    assert list(report["stats"]) == ["engine", "TPNET (1 pass)"] and report["rig"] == "binocular"
+    assert list(report["stats"]) == ["engine", "TPNET (1 pass, no context)", "TPNET (1 pass)"]
+    assert report["rig"] == "binocular"
     _check_accuracy(report, {"engine"})
     assert "rig binocular (2 cameras)" in report["table"][0]
     torch.save(TPNet().state_dict(), tmp_path / "quad.pt")  # no recipe: the quad's lags
