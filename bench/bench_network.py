@@ -8,7 +8,8 @@ Scenes are rendered fresh with seeds no training scene uses (``--seed`` 10000+),
 the old loop (8-step sweep, LMA refinement, consistency pass: ``tpnet_gpu.baseline.estimate``, the reference),
 the disparity engine (``tpnet_gpu.disparity``) with its default on-device measurement and with the quad's LMA,
 and TPNET reading the layers at the engine's disparities (its first-stage answer where it measured none), each
-further pass re-correlating at the previous pass's disparity (one row per pass count, up to ``--passes``).
+further pass re-correlating at the previous pass's disparity (one row per pass count, up to ``--passes``), then its
+context step as the pipeline runs it (``net/context.py``; a row "no context" per pass count without it).
 Scored per class (tpnet_gpu/evaluation.py): strict and either-surface gross, own-inlier RMSE, rmse-ref on the
 tiles the old loop gets within 1 px (the paper's protocol), tiles made gross that it had right, coverage,
 confidence ranking, tile-processor passes and seconds per frame (the engine timed warm).
@@ -35,6 +36,7 @@ from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import EngineConfig
 from tpnet_gpu.disparity import DisparityEngine
 from tpnet_gpu.net import infer
+from tpnet_gpu.net.context import context_step
 from tpnet_gpu.net.layers import QUAD_LAGS, NetworkLayers, lags_match, rig_lags
 from tpnet_gpu.processor import TileProcessor
 from tpnet_gpu.scenes import Sensor, render
@@ -61,8 +63,8 @@ class CountingCorrelator:
         return self.correlate(target)
 
 
-def pass_name(n: int) -> str:
-    return f"TPNET ({n} pass{'es' if n > 1 else ''})"
+def pass_name(n: int, context: bool = True) -> str:
+    return f"TPNET ({n} pass{'es' if n > 1 else ''}{'' if context else ', no context'})"
 
 
 def main(argv=None) -> dict:
@@ -104,7 +106,7 @@ def main(argv=None) -> dict:
         rendered = render(scene, rig, sensor=Sensor(), supersample=2, seed=args.seed + index)
         frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
         shape = rendered.tile_disparity.shape
-        estimates, confidences, costs = {}, {}, {}
+        estimates, confidences, costs, results = {}, {}, {}, {}
         if quad:
             start = time.perf_counter()
             counted = CountingCorrelator(processor_correlator(base_tp, frames))
@@ -114,11 +116,12 @@ def main(argv=None) -> dict:
         for name, engine in engines.items():
             engine.run(frames)  # warm-up of this size (kernels, tables) outside the timing
             start = time.perf_counter()
-            result = engine.run(frames)
+            result = results[name] = engine.run(frames)
             estimates[name] = result.disparity.cpu().numpy().astype(np.float64)
             confidences[name] = result.confidence.cpu().numpy().astype(np.float64)
             costs[name] = {"seconds": time.perf_counter() - start, "tile_passes": result.tile_passes}
         # TPNET reads the layers at the engine's disparities (its first stage's answer where it measured none)
+        result = results[ENGINE]  # the pipeline's engine (the loop above ended with the LMA one)
         measured = torch.isfinite(result.disparity)
         target = torch.where(measured, result.disparity, result.search)
         if network_tp is not engines[ENGINE].tp:
@@ -126,17 +129,22 @@ def main(argv=None) -> dict:
         start = time.perf_counter()
         for n in range(1, args.passes + 1):
             target = infer.infer(model, layers.of(engines[ENGINE].measure_at(network_tp, target)), target, grid=shape)
-            net = target.cpu().numpy().astype(np.float64)
-            net[~measured.cpu().numpy()] = np.nan  # scored on the tiles the engine measured
-            estimates[pass_name(n)] = net
-            costs[pass_name(n)] = {"seconds": costs[ENGINE]["seconds"] + time.perf_counter() - start,
-                                   "tile_passes": costs[ENGINE]["tile_passes"] + n}
+            net = torch.where(measured, target, torch.full_like(target, float("nan")))  # the engine's tiles
+            raw_seconds = time.perf_counter() - start
+            # the pipeline's answer: the context step after the last pass (the next pass reads the raw output)
+            stepped = context_step(net, result.strength)
+            for name, disparity, seconds in ((pass_name(n, context=False), net, raw_seconds),
+                                             (pass_name(n), stepped, time.perf_counter() - start)):
+                estimates[name] = disparity.cpu().numpy().astype(np.float64)
+                costs[name] = {"seconds": costs[ENGINE]["seconds"] + seconds,
+                               "tile_passes": costs[ENGINE]["tile_passes"] + n}
         log(f"scene {index} ({scene.name}): " + ", ".join(f"{k} {v['seconds']:.2f} s" for k, v in costs.items()))
         scenes.append({"gt": rendered.tile_disparity, "confidence": rendered.tile_confidence,
                        "spread": rendered.tile_spread, "estimates": estimates, "surfaces": rendered.tile_surfaces,
                        "confidences": confidences, "per_frame": costs})
 
-    methods = ([OLD] if quad else []) + [*engine_names] + [pass_name(n) for n in range(1, args.passes + 1)]
+    methods = ([OLD] if quad else []) + [*engine_names] + [name for n in range(1, args.passes + 1)
+                                                           for name in (pass_name(n, context=False), pass_name(n))]
     rig_text = "" if args.rig is None else f", rig {args.rig} ({rig.cams} cameras)"
     title = (f"{'Old sweep, the' if quad else 'The'} disparity engine and TPNET, {args.scenes} held-out rendered scenes "
              f"of {args.width}x{args.height} (seeds {args.seed}+){rig_text}, weights "

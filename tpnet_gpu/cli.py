@@ -208,8 +208,8 @@ OVERWRITE_HELP = "replace the files of a non-empty output folder (default: refus
 WEIGHTS_HELP = ("TPNET weights from `tpnet train` (default: the shipped ones for the rig); weights trained for another "
                 "rig or other colours are refused")
 NO_FIGURES_HELP = "write no labelled figures (PNG, matplotlib): faster; the TIFFs, points.ply and texture.png stay"
-BENCHES = ("tp", "accuracy", "network", "network_limits", "throughput", "startup", "fuzz", "calibration", "ray",
-           "flow", "two_surface")
+BENCHES = ("tp", "accuracy", "network", "network_limits", "network_context", "throughput", "startup", "fuzz",
+           "calibration", "ray", "flow", "two_surface")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:

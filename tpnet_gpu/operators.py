@@ -89,7 +89,8 @@ def window_squared() -> np.ndarray:
 
 
 def shifted_basis_parts() -> tuple[np.ndarray, np.ndarray]:
-    """The shift-free parts of the forward basis of §3.1 / §13, for its evaluation by angle addition.
+    """The shift-free parts of the forward basis of tile_processor.md §3.1 / §13, for its evaluation by angle
+    addition.
 
     The basis is ``1/2 w(n + s) cos|sin(omega_k (n + s + 4.5))`` with ``w(n + s) = sin(b_n + theta)``,
     ``b_n = pi (2n + 1) / 32`` and ``omega_k (n + s + 4.5) = phi_kn + (2k + 1) theta``, ``theta = pi s / 16``.

@@ -5,7 +5,8 @@ grid, sparse re-correlation) gives each tile's disparity; TPNET then reads the n
 disparities (the quad's from the processor's kernel, zero-copy; any other rig's from its pair correlations, one
 layer per direction group, ``tpnet_gpu.net.layers``) and predicts the final disparity, with weights trained for
 the rig's layer lags (network.md §11: the shipped ones are picked by lags; a rig none fits runs without the
-network, logged); the texture is made at that disparity.
+network, logged), and its context step (``net/context.py``, network.md §13) averages each tile with its
+neighbours on the same surface; the texture is made at that disparity.
 Frames are loaded once per frame. Buffers belong to the tile processors and the model and are allocated once per
 frame size; results are views or new small tensors, valid until the next frame.
 """
@@ -25,6 +26,7 @@ from tpnet_gpu.config import EngineConfig, TextureConfig
 from tpnet_gpu.disparity.engine import DisparityEngine
 from tpnet_gpu.disparity.two_surface import Surfaces, measure_surfaces
 from tpnet_gpu.net import infer
+from tpnet_gpu.net.context import context_step
 from tpnet_gpu.net.layers import NetworkLayers, lags_match
 from tpnet_gpu.processor import TileProcessor
 
@@ -53,8 +55,9 @@ class FrameResult:
     """One frame's results, torch tensors on the pipeline's device (valid until the next frame).
 
     Attributes:
-        disparity: ``(tiles_y, tiles_x)`` final disparity, px (TPNET's where the pipeline has weights for its
-            rig, ``Pipeline.weights``, else the engine's); NaN where the engine trusted no measurement.
+        disparity: ``(tiles_y, tiles_x)`` final disparity, px (TPNET's after its context step where the pipeline
+            has weights for its rig, ``Pipeline.weights``, else the engine's); NaN where the engine trusted no
+            measurement.
         confidence: ``(tiles_y, tiles_x)`` the engine's confidence (its final correlation peak's strength,
             scaled down on two-depth tiles; higher = surer), 0 = none.
         two_depth: ``(tiles_y, tiles_x)`` bool: the tile's window straddles two depths (its neighbours'
@@ -171,7 +174,9 @@ class Pipeline:
             for _ in range(cfg.network_passes):
                 layers = self.layers.of(self.engine.measure_at(tp, target))
                 target = self._infer(self.model, layers, target, grid=self.grid)
-            disparity = torch.where(measured, target, torch.full_like(target, float("nan")))
+            # the context step after the last pass (net/context.py: between passes the next pass undid it)
+            disparity = context_step(torch.where(measured, target, torch.full_like(target, float("nan"))),
+                                     result.strength)
         texture = None
         if cfg.textures:  # shift-corrected at the final disparity
             self.engine.set_targets(tp, torch.where(measured, disparity, result.search))

@@ -12,6 +12,7 @@ import pkgutil
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import torch
 
@@ -142,7 +143,8 @@ def test_bench_network(tmp_path, capsys):
     argv = ["--scenes", "1", "--passes", "1", "--height", "64", "--width", "64", "--png", str(png or "")]
     report, out, err = run_bench(bench_network, argv, tmp_path, capsys)
     assert ACCURACY_KEYS | {"passes"} <= set(report)
-    assert list(report["stats"]) == ["old sweep + LMA", "engine", "engine (LMA)", "TPNET (1 pass)"]
+    assert list(report["stats"]) == ["old sweep + LMA", "engine", "engine (LMA)", "TPNET (1 pass, no context)",
+                                     "TPNET (1 pass)"]
     _check_accuracy(report, {"old sweep + LMA", "engine", "engine (LMA)"})
     passes = report["per_frame"]
     assert passes["old sweep + LMA"]["tile_passes"] >= 8 and passes["engine"]["tile_passes"] > 0  # budget: engine tests
@@ -160,7 +162,8 @@ def test_bench_network_binocular(tmp_path, capsys):
     argv = ["--scenes", "1", "--passes", "1", "--height", "64", "--width", "64", "--png", "", "--rig", "binocular",
             "--weights", str(weights)]
     report, out, err = run_bench(bench_network, argv, tmp_path, capsys)
-    assert list(report["stats"]) == ["engine", "TPNET (1 pass)"] and report["rig"] == "binocular"
+    assert list(report["stats"]) == ["engine", "TPNET (1 pass, no context)", "TPNET (1 pass)"]
+    assert report["rig"] == "binocular"
     _check_accuracy(report, {"engine"})
     assert "rig binocular (2 cameras)" in report["table"][0]
     torch.save(TPNet().state_dict(), tmp_path / "quad.pt")  # no recipe: the quad's lags
@@ -185,6 +188,24 @@ def test_bench_network_limits(tmp_path, capsys):
     for rows in report["budget"].values():
         assert sum(r["sse_share"] for r in rows) == pytest.approx(1.0) or all(r["sse_share"] == 0 for r in rows)
     assert report["table"][0] in out and "[bench_network_limits]" in err
+
+
+def test_bench_network_context(tmp_path, capsys):
+    from tpnet_gpu.bench import bench_network_context as context
+    from tpnet_gpu.net.context import context_step
+
+    argv = ["--scenes", "2", "--check-from", "1", "--height", "64", "--width", "96"]
+    report, out, err = run_bench(context, argv, tmp_path, capsys)
+    assert list(report["stats"]) == ["tuning", "check"]
+    for per in report["stats"].values():
+        assert {"engine", "TPNET, 1 pass", "TPNET + shipped step, 1 pass", "engine + shipped step"} <= set(per)
+        assert all(set(stats) == {"flat", "edge", "all"} for stats in per.values())
+    assert report["table"][0] in out and "[bench_network_context]" in err
+    # the bench's family of steps at the shipped settings is the shipped step (a grid with NaN holes, two surfaces)
+    grid = torch.from_numpy(np.random.default_rng(0).normal(5.0, 0.3, (9, 11)).astype(np.float32))
+    grid[2, 3], grid[:, 7:] = float("nan"), grid[:, 7:] + 3.0
+    strength = torch.rand(9, 11, generator=torch.Generator().manual_seed(0))
+    torch.testing.assert_close(context.variant(grid, strength), context_step(grid, strength), equal_nan=True)
 
 
 def test_bench_fuzz(tmp_path, capsys):

@@ -3,7 +3,8 @@
 Scene: the demo scene, 320x240 (40x30 tiles), photon and read noise on, seed 7 (not a held-out bench seed,
 those are 10000+), rendered once for the module. Oracles: the renderer's per-tile ground truth
 (``Rendered.tile_disparity``) for accuracy; TPNET run by hand from the public pieces (a tile processor with the
-weights' correlation settings, ``infer.infer``) for "the pipeline returns what the network says".
+weights' correlation settings, ``infer.infer``, then its context step ``net.context.context_step`` with the engine's
+strength; the step has its own oracle tests in test_context.py) for "the pipeline returns what the network says".
 The fixture takes ~2.6 s in the full suite on 2 idle cores (~5 s run alone: it then also pays the Warp and
 Taichi start-up), the tests < 1 s each: not marked slow.
 """
@@ -18,6 +19,7 @@ from tpnet_gpu.camera import Rig
 from tpnet_gpu.cli import main
 from tpnet_gpu.disparity.engine import REFERENCE_LEVEL
 from tpnet_gpu.net import infer
+from tpnet_gpu.net.context import context_step
 from tpnet_gpu.pipeline import Pipeline, load_frames
 from tpnet_gpu.processor import TileProcessor
 from tpnet_gpu.scenes import Sensor, demo_scene, render
@@ -25,20 +27,25 @@ from tpnet_gpu.scenes.folder import save
 
 WIDTH, HEIGHT, SEED = 320, 240, 7
 # RMSE(network) / RMSE(initial targets) on the flat tiles where the initial target is within 1 px of the ground
-# truth. Measured with the shipped weights on this scene (demo, 320x240, noise on), seeds 1-10: 0.54-0.63
-# (seed 7: 0.57); an identity network gives exactly 1.0.
-MAX_RATIO = 0.8
+# truth. Measured with the shipped weights and the context step on this scene (demo, 320x240, noise on), seeds
+# 1-10: 0.37-0.50 (seed 7: 0.37; the network alone: 0.54-0.63); an identity network followed by the context step
+# gives 0.60-0.73 (seed 7: 0.69), without the step exactly 1.0.
+MAX_RATIO = 0.55
 MIN_TILES = 300  # flat tiles with the initial within 1 px: ~420 on this scene
 
 
 @pytest.fixture(scope="module")
 def scene():
-    """The rendered scene, its black-subtracted frames and the pipeline's result on them (NumPy copies)."""
+    """The rendered scene, its black-subtracted frames and the pipeline's result on them (NumPy copies), with the
+    engine's strength (its run again on the frames: deterministic)."""
     rig = Rig(width=WIDTH, height=HEIGHT)
     rendered = render(demo_scene(rig, seed=SEED), rig, sensor=Sensor(), supersample=2, seed=SEED)
     frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
-    result = Pipeline(HEIGHT, WIDTH, cfa=rendered.sensor.cfa, device="cpu").process(frames)
-    return rendered, frames, {name: getattr(result, name).cpu().numpy() for name in ("disparity", "initial", "search")}
+    pipe = Pipeline(HEIGHT, WIDTH, cfa=rendered.sensor.cfa, device="cpu")
+    result = pipe.process(frames)
+    out = {name: getattr(result, name).cpu().numpy() for name in ("disparity", "initial", "search")}
+    out["strength"] = pipe.engine.run(frames).strength.cpu().numpy()
+    return rendered, frames, out
 
 
 def network_gain(rendered, disparity: np.ndarray, initial: np.ndarray) -> tuple[float, int]:
@@ -69,7 +76,8 @@ def test_network_beats_its_initial_targets(scene):
 
 def test_pipeline_returns_the_networks_output(scene):
     """Oracle: TPNET run by hand on a tile processor with the weights' correlation settings, at the pipeline's
-    initial targets (the first stage's answer where unmeasured, as the pipeline feeds them). Tolerance: 1e-4 px where measured; the
+    initial targets (the first stage's answer where unmeasured, as the pipeline feeds them), then the context step
+    on the measured tiles with the engine's strength. Tolerance: 1e-4 px where measured; the
     network moves >= 90 % of the measured tiles by more than 1e-3 px (measured: 99 % of the 77 % measured;
     the hand-run network matches to 0 px on the same backend, 2e-5 px across Warp and Taichi)."""
     rendered, frames, result = scene
@@ -80,7 +88,9 @@ def test_pipeline_returns_the_networks_output(scene):
     # the engine scales the frames to a reference mean level before correlating (tpnet_gpu/disparity/engine.py)
     scaled = frames * np.float32(REFERENCE_LEVEL / np.abs(frames).mean())
     layers = tp.process(scaled, target).layers
-    expected = infer.infer(infer.load(), layers, target, grid=(tp.tiles_y, tp.tiles_x)).numpy()
+    network = infer.infer(infer.load(), layers, target, grid=(tp.tiles_y, tp.tiles_x))
+    expected = context_step(torch.where(torch.from_numpy(measured), network, torch.tensor(float("nan"))),
+                            torch.from_numpy(result["strength"])).numpy()
     np.testing.assert_allclose(result["disparity"][measured], expected[measured], rtol=0, atol=1e-4)
     assert np.isnan(result["disparity"][~measured]).all()
     assert measured.mean() > 0.5, f"{measured.mean():.0%} of the tiles measured"
@@ -89,14 +99,14 @@ def test_pipeline_returns_the_networks_output(scene):
 
 def test_identity_network_fails_the_accuracy_criterion(scene, monkeypatch):
     """The accuracy test can fail: with ``infer.infer`` returning its input (patched before the pipeline is
-    built: it keeps the function it found) the pipeline's disparity is its initial targets and the ratio of
-    test_network_beats_its_initial_targets is exactly 1 (> 0.8)."""
+    built: it keeps the function it found) the pipeline's disparity is its initial targets after the context step
+    and the ratio of test_network_beats_its_initial_targets is 0.69 (> 0.55)."""
     rendered, frames, _ = scene
     monkeypatch.setattr(infer, "infer", lambda model, layers, target, grid=None, active=None: target.clone())
     result = Pipeline(HEIGHT, WIDTH, cfa=rendered.sensor.cfa, device="cpu").process(frames)
     disparity, initial = result.disparity.cpu().numpy(), result.initial.cpu().numpy()
     ratio, _ = network_gain(rendered, disparity, initial)
-    assert ratio == pytest.approx(1.0) and ratio > MAX_RATIO
+    assert ratio > MAX_RATIO
 
 
 def test_cli_process_writes_the_networks_disparity(scene, tmp_path):

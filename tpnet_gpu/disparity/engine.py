@@ -101,6 +101,15 @@ def neighbourhood(grid: torch.Tensor) -> torch.Tensor:
     return padded.unfold(0, 3, 1).unfold(1, 3, 1).reshape(*grid.shape, 9)
 
 
+def weighted_mean(windows: torch.Tensor, weights: torch.Tensor, same: torch.Tensor):
+    """``(mean, total)``, each ``(ty, tx)``: the ``weights``-weighted mean of ``windows (ty, tx, n)`` over the
+    entries where ``same (ty, tx, n)`` holds (NaN entries must not), and the weight summed there (0: none, the
+    mean is then 0)."""
+    w = torch.where(same, weights, 0.0)
+    total = w.sum(dim=-1)
+    return (w * torch.nan_to_num(windows)).sum(dim=-1) / total.clamp(min=1e-12), total
+
+
 def two_depth(disparity: torch.Tensor) -> torch.Tensor:
     """``(ty, tx)`` bool: measured tiles whose measured 3x3 neighbourhood spans more than ``TWO_DEPTH_SPREAD``."""
     windows = neighbourhood(disparity)
@@ -118,13 +127,12 @@ def settle(disparity: torch.Tensor, strength: torch.Tensor) -> torch.Tensor:
     weights = neighbourhood(torch.where(torch.isfinite(disparity), strength, torch.zeros_like(strength)))
     median = torch.nanmedian(windows, dim=-1, keepdim=True).values
     same = (windows - median).abs() <= SURFACE_BAND  # False for NaN
-    w = torch.where(same, weights, torch.zeros_like(weights))
-    mean = (w * torch.nan_to_num(windows)).sum(dim=-1) / w.sum(dim=-1).clamp(min=1e-12)
+    mean, total = weighted_mean(windows, weights, same)
     own = ((windows - disparity[..., None]).abs() <= SURFACE_BAND).sum(dim=-1)
     on_surface = (disparity - median[..., 0]).abs() <= SURFACE_BAND
     weak = (strength < WEAK_STRENGTH) & (same.sum(dim=-1) >= SURFACE_MIN) & ((disparity - mean).abs() > WEAK_OFF)
     weak &= on_surface | (own <= ISOLATED)
-    return torch.where(weak & (w.sum(dim=-1) > 0), mean, disparity)
+    return torch.where(weak & (total > 0), mean, disparity)
 
 
 def reference_scale(frames: torch.Tensor) -> torch.Tensor:
