@@ -131,3 +131,34 @@ def test_banded_convert_equals_whole_frame_texture(device, backend, rows, monkey
         torch.testing.assert_close(getattr(banded.result, name), getattr(whole.result, name), rtol=0, atol=0)
     got = banded.process(frames, disparity, active=active)
     torch.testing.assert_close(got.texture, whole.process(frames, disparity, active=active).texture, rtol=0, atol=0)
+
+
+def test_taichi_exp_matches_float64_exp():
+    """The Taichi combine's e^x (kernels/taichi_texture.exp_f32, an inline float32 polynomial instead of libm).
+    Oracle: NumPy's float64 exp; relative tolerance 1.5e-7 + 4e-8 |n|, n = x / ln 2 (the polynomial ~1 ulp plus
+    n ln 2 rounded to float32, ~3.5e-8 per unit of n; measured 1.2e-7 at n = 0, 5.6e-7 at x = -10, 4.1e-6 at
+    -72) on [-87, 2]; 0 below ln of the smallest normal float (-87.33). Checked to fail: the last polynomial
+    coefficient 0.5 -> 0.49, or n rounded towards zero (r then reaches -ln 2, outside the polynomial's range)."""
+    import taichi as ti
+
+    from tpnet_gpu import taichi_setup
+    from tpnet_gpu.kernels import taichi_texture
+    from tpnet_gpu.kernels.taichi_types import F32_1D
+
+    taichi_setup.init_taichi("cpu")
+
+    @ti.kernel
+    def exp_of(x: F32_1D, out: F32_1D):
+        for i in x:
+            out[i] = taichi_texture.exp_f32(x[i])
+
+    x = np.concatenate([np.linspace(-87.0, 2.0, 400_001), -np.logspace(-8, 1, 2001), [0.0, -87.4, -100.0, -1e30]])
+    x = x.astype(np.float32)
+    got = torch.zeros(len(x))
+    exp_of(torch.from_numpy(x), got)
+    got = got.numpy()
+    inside = x >= -87.0
+    want = np.exp(x[inside].astype(np.float64))
+    tolerance = 1.5e-7 + 4e-8 * np.abs(x[inside]) / np.log(2.0)
+    assert np.all(np.abs(got[inside] - want) / want <= tolerance)
+    assert np.all(got[x < -87.33] == 0)

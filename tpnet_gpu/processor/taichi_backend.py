@@ -35,7 +35,7 @@ class TaichiBackend:
         self.cuda = buffers.device.is_cuda
         self.arch = "cuda" if self.cuda else "cpu"
         taichi_setup.init_taichi(self.arch)
-        self.t = {}  # Warp array id -> its torch view, made once
+        self.t = {}  # Warp array id (or ("runs", id)) -> its torch view, made once
         self.frames_t = buffers.frames_t
         # Fused pass: a few slots per CPU thread (balance), one GPU thread per slot on CUDA (at most one per tile).
         slots = min(geo.tiles, CUDA_FUSED_SLOTS) if self.cuda else CPU_FUSED_SLOTS_PER_THREAD * taichi_setup.threads()
@@ -47,6 +47,16 @@ class TaichiBackend:
         view = self.t.get(id(array))
         if view is None:
             view = self.t[id(array)] = self.b.torch(array)
+        return view
+
+    def _runs(self, array) -> torch.Tensor:
+        """``array`` (..., 16) as runs of ``taichi_texture.LANES`` pixels (..., 16 / LANES, LANES), made once."""
+        key = ("runs", id(array))
+        view = self.t.get(key)
+        if view is None:
+            tensor = self._v(array)
+            lanes = taichi_texture.LANES
+            view = self.t[key] = tensor.view(*tensor.shape[:-1], tensor.shape[-1] // lanes, lanes)
         return view
 
     def run(self, steps: tuple[str, ...], *, frames: torch.Tensor | None, masked: bool) -> None:
@@ -121,11 +131,12 @@ class TaichiBackend:
                                          tc.min_shot, v(band.pix), v(band.cmp))
 
         def write_pixels(band) -> None:
+            runs = self._runs
             taichi_texture.texture_combine(
-                v(band.pix), v(band.cmp), v(b.finite), band.first * geo.tiles_x, geo.tiles_x, geo.tiles_y,
+                runs(band.pix), runs(band.cmp), v(b.finite), band.first * geo.tiles_x, geo.tiles_x, geo.tiles_y,
                 b.ring_rows, geo.cams, geo.colours, v(b.offsets), v(b.tex_weights_c), v(b.channel_of_colour),
-                tc.diff_sigma, tables.TEXTURE_WEIGHT_FLOOR, int(tc.dust_remove), tc.output_gain, v(b.window2),
-                v(b.tex_rgba),
+                tc.diff_sigma, tables.TEXTURE_WEIGHT_FLOOR, int(tc.dust_remove), tc.output_gain, runs(b.window2),
+                runs(b.tex_rgba),
             )
             taichi_texture.overlap_add(v(b.tex_rgba), v(b.finite), geo.tiles_x, geo.tiles_y, b.ring_rows, band.y0,
                                        band.rows, v(b.canvas))
