@@ -33,7 +33,7 @@ import torch
 
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.disparity import DisparityEngine
-from tpnet_gpu.disparity.engine import two_depth, weighted_mean
+from tpnet_gpu.disparity.engine import neighbourhood, two_depth, weighted_mean
 from tpnet_gpu.evaluation import error_stats, is_gross, reference_inliers, tile_classes
 from tpnet_gpu.net import infer
 from tpnet_gpu.net.context import CONTEXT_BAND, context_step
@@ -49,27 +49,20 @@ CLASSES = ("flat", "edge", "all")
 SHIPPED = "TPNET + shipped step"
 
 
-def windows(grid: torch.Tensor, size: int) -> torch.Tensor:
-    """``(ty, tx, size * size)``: each tile's ``size`` x ``size`` neighbourhood of ``grid (ty, tx)`` (NaN beyond)."""
-    r = size // 2
-    padded = torch.nn.functional.pad(grid[None, None], (r, r, r, r), value=float("nan"))[0, 0]
-    return padded.unfold(0, size, 1).unfold(1, size, 1).reshape(*grid.shape, size * size)
-
-
 def variant(disparity: torch.Tensor, weight: torch.Tensor, *, size: int = 3, band: float = CONTEXT_BAND,
             surface: str = "own", skip: torch.Tensor | None = None) -> torch.Tensor:
     """A context step of the family the shipped one belongs to: ``disparity (ty, tx)`` (NaN = none), each finite
     tile replaced by the ``weight``-weighted mean of its ``size`` x ``size`` tiles on its surface: those within
     ``band`` of the tile (``surface`` "own") or of the window's median ("median": only tiles within ``band`` of it
     move); ``surface`` "median only" takes the median itself (network.md §10). Tiles of ``skip`` keep their value."""
-    w = windows(disparity, size)
+    w = neighbourhood(disparity, size)
     median = torch.nanmedian(w, dim=-1).values
     centre = disparity if surface == "own" else median
     near = torch.isfinite(disparity) & ((disparity - centre).abs() <= band)
     if surface == "median only":
         new = median
     else:
-        weights = windows(torch.where(torch.isfinite(disparity), weight, 0.0), size)
+        weights = neighbourhood(torch.where(torch.isfinite(disparity), weight, 0.0), size)
         new, total = weighted_mean(w, weights, (w - centre[..., None]).abs() <= band)
         near &= total > 0
     if skip is not None:

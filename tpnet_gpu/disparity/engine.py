@@ -95,10 +95,12 @@ class DisparityResult:
     tile_passes: float
 
 
-def neighbourhood(grid: torch.Tensor) -> torch.Tensor:
-    """``(ty, tx, 9)``: each tile's 3x3 neighbourhood of ``grid (ty, tx)`` in row order (NaN beyond the edge)."""
-    padded = torch.nn.functional.pad(grid[None, None], (1, 1, 1, 1), value=float("nan"))[0, 0]
-    return padded.unfold(0, 3, 1).unfold(1, 3, 1).reshape(*grid.shape, 9)
+def neighbourhood(grid: torch.Tensor, size: int = 3) -> torch.Tensor:
+    """``(ty, tx, size * size)``: each tile's ``size`` x ``size`` neighbourhood (odd ``size``) of ``grid (ty, tx)``
+    in row order (NaN beyond the edge)."""
+    r = size // 2
+    padded = torch.nn.functional.pad(grid[None, None], (r, r, r, r), value=float("nan"))[0, 0]
+    return padded.unfold(0, size, 1).unfold(1, size, 1).reshape(*grid.shape, size * size)
 
 
 def weighted_mean(windows: torch.Tensor, weights: torch.Tensor, same: torch.Tensor):
