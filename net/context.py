@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import torch
 
-from tpnet_gpu.disparity.engine import neighbourhood, weighted_mean
+from tpnet_gpu.disparity.grid import neighbourhood, weighted_mean
 
 # px: the neighbours within this of a tile count as its surface. Measured with the v4 weights, one pass, on 32
 # rendered 640x480 scenes of seeds 20000+ (neither training nor held out; bench/bench_network_context.py),

@@ -24,7 +24,8 @@ import numpy as np
 import torch
 
 from tpnet_gpu.camera import Rig, grid_centres
-from tpnet_gpu.disparity.engine import DisparityEngine, correlation_for, neighbourhood, reference_scale
+from tpnet_gpu.disparity.engine import DisparityEngine, correlation_for, reference_scale
+from tpnet_gpu.disparity.grid import neighbourhood
 from tpnet_gpu.disparity.measure import Peak2D, row_chunks
 from tpnet_gpu.disparity.pairs import combine_pairs
 from tpnet_gpu.flow_align import Alignment

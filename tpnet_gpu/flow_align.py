@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from tpnet_gpu.camera import Rig, grid_centres
-from tpnet_gpu.disparity.engine import neighbourhood
+from tpnet_gpu.disparity.grid import neighbourhood
 from tpnet_gpu.layout import TILE_CENTRE, TILE_STRIDE
 
 FILL_STEPS = 8  # neighbour-median sweeps that carry measured disparities into unmeasured tiles

@@ -61,7 +61,7 @@ class FrameResult:
         confidence: ``(tiles_y, tiles_x)`` the engine's confidence (its final correlation peak's strength,
             scaled down on two-depth tiles; higher = surer), 0 = none.
         two_depth: ``(tiles_y, tiles_x)`` bool: the tile's window straddles two depths (its neighbours'
-            disparities span more than 1 px): flagged, not a surface to trust (engine.two_depth).
+            disparities span more than 1 px): flagged, not a surface to trust (grid.two_depth).
         initial: ``(tiles_y, tiles_x)`` the engine's disparities the network read its layers at (NaN = none).
         search: ``(tiles_y, tiles_x)`` the engine's first-stage answer (finite everywhere): where ``initial`` is
             NaN the network and the texture read the tile there.

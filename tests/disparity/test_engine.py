@@ -13,7 +13,6 @@ from tests.textures import fourier_shift
 from tpnet_gpu import evaluation
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.disparity import DisparityEngine
-from tpnet_gpu.disparity.engine import settle, two_depth
 from tpnet_gpu.scenes import Sensor, demo_scene, render
 
 W, H = 320, 240
@@ -101,50 +100,6 @@ def test_8bit_photograph_pair_at_known_shifts():
         assert np.median(np.abs(inliers)) <= 0.06
 
 
-def test_two_depth_flags_tiles_beside_a_depth_step():
-    """Physical oracle: a 2 px step between tile columns 3 and 4 (a window 16 px wide at stride 8 sees both
-    sides) flags the tiles of columns 3 and 4 only; a ramp of 0.4 px per tile (spread 0.8 px) flags nothing;
-    unmeasured tiles are never flagged and do not count as neighbours (an unmeasured column 3 hides the step)."""
-    grid = torch.zeros(5, 8)
-    grid[:, 4:] = 2.0
-    flags = two_depth(grid)
-    assert flags[:, 3:5].all() and not flags[:, :3].any() and not flags[:, 5:].any()
-    assert not two_depth(0.4 * torch.arange(8.0).expand(5, 8)).any()
-    grid[:, 3] = float("nan")
-    flags = two_depth(grid)
-    assert not flags.any()
-
-
-def test_settle_moves_only_weak_outliers_on_a_surface():
-    """Oracle: hand-computed strength-weighted means. A plane at 5.0 px (strength 0.5) with 0.2 px of stripes;
-    a weak tile (0.1) at 7.0 px takes the mean of the 8 surface tiles around it (it is off the surface band of
-    1.5 px, so its own value does not count); the same tile strong (0.5) keeps 7.0; a weak tile 1.3 px off its
-    surface (within the band: on it) takes the strength-weighted mean with itself in it; a weak tile 0.4 px from
-    its surface mean keeps its value
-    (within ``WEAK_OFF``); a weak tile on a 1-tile-wide ridge of 9 px (3 of its 9 neighbourhood tiles) keeps
-    it; unmeasured tiles stay NaN."""
-    grid = torch.full((7, 9), 5.0)
-    grid[:, ::2] += 0.2
-    strength = torch.full((7, 9), 0.5)
-    grid[2, 2], strength[2, 2] = 7.0, 0.1  # weak outlier
-    grid[2, 5], strength[2, 5] = 7.0, 0.5  # strong: its own peak
-    grid[5, 4], strength[5, 4] = 6.5, 0.1  # weak, 1.3 px off: on the surface band
-    grid[4, 2], strength[4, 2] = grid[4, 2] + 0.3, 0.1  # weak, 0.4 px from its surface: within WEAK_OFF
-    grid[:, 7], strength[5, 7] = 9.0, 0.1  # a ridge one tile wide
-    grid[0, 0] = float("nan")
-    settled = settle(grid, strength)
-    ring = [grid[y, x] for y in (1, 2, 3) for x in (1, 2, 3) if (y, x) != (2, 2)]
-    assert settled[2, 2] == pytest.approx(float(sum(ring)) / 8, abs=1e-6)  # equal strengths: the plain mean
-    assert settled[2, 5] == 7.0 and settled[4, 2] == grid[4, 2] and settled[5, 7] == 9.0
-    around = [(grid[y, x], strength[y, x]) for y in (4, 5, 6) for x in (3, 4, 5)]
-    weighted = sum(float(g) * float(w) for g, w in around) / sum(float(w) for _, w in around)
-    assert settled[5, 4] == pytest.approx(weighted, abs=1e-6)
-    assert torch.isnan(settled[0, 0])
-    unchanged = torch.ones(7, 9, dtype=torch.bool)
-    unchanged[2, 2] = unchanged[0, 0] = unchanged[5, 4] = False
-    assert torch.equal(settled[unchanged], grid[unchanged])
-
-
 def test_two_depth_tiles_are_the_rendered_depth_edges():
     """Oracle: the renderer's depth-edge tiles (evaluation.tile_classes). Measured on the quad scene: 64 % of
     the flagged tiles are edge tiles (78 %), and their gross rate is 2.2x the rest's (18 % vs 8 %)."""
@@ -203,3 +158,22 @@ def test_refinement_cannot_drag_a_clear_answer_away(monkeypatch, leash, fails):
     engine = DisparityEngine(H, W, rig=rig, cfa=rendered.sensor.cfa, config=EngineConfig(leash=leash), device="cpu")
     stats = flat_stats(rendered, engine.run(frames).disparity)
     assert (stats["gross"] > 0.05) == fails, stats
+
+
+def test_other_starts_are_the_supported_answers_of_the_other_sparse_neighbours():
+    """Oracle: the index arithmetic by hand. Tiles between sparse tiles (odd rows or columns) get the answers of
+    the sparse tiles below, right and below-right of them; sparse tiles and directions with no sparse tile
+    between get their own start (the sparse tile above-left); an answer none of its 8 sparse neighbours shares
+    within 1 px, and a direction past the last sparse row or column, give NaN."""
+    engine = DisparityEngine(48, 48, device="cpu")  # 6 x 6 tiles, a 3 x 3 sparse grid
+    assert engine.grid == (6, 6)
+    coarse = torch.tensor([[1.0, 1.5, 2.0], [1.2, 30.0, 2.2], [1.4, 1.6, 2.4]])  # 30: isolated
+    below, right, diagonal = engine._other_starts(coarse)
+    supported = coarse.clone()
+    supported[1, 1] = float("nan")
+    assert below[1, 1] == supported[1, 0] and right[1, 1] == supported[0, 1] and torch.isnan(diagonal[1, 1])
+    assert below[2, 1] == supported[1, 0] and torch.isnan(right[2, 1]) and torch.isnan(diagonal[2, 1])
+    assert torch.isnan(below[2, 2]) and torch.isnan(right[2, 2]) and torch.isnan(diagonal[2, 2])
+    assert below[0, 3] == supported[0, 1] and right[0, 3] == supported[0, 2] and diagonal[0, 3] == supported[0, 2]
+    assert torch.isnan(below[5, 0]) and right[5, 0] == supported[2, 0] and torch.isnan(diagonal[5, 0])
+    assert below[4, 4] == right[4, 4] == diagonal[4, 4] == supported[2, 2]

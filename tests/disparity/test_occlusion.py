@@ -62,3 +62,18 @@ def test_background_beside_near_objects_is_not_taken_by_their_edges(monkeypatch)
                                    classes["flat"])
     assert stats["coverage"] >= 0.9 and stats["gross"] <= 0.015, stats
     assert result.tile_passes <= 6.0
+
+
+def test_a_tile_every_pair_sees_at_its_choice_is_not_read_behind_it():
+    """Physical fact: a tile whose combined correlation over every pair is strong at its disparity is seen by
+    every camera there, so no nearer surface hides it (``SEEN_STRENGTH``): beside the block's edge (block_map,
+    32 px over 0 px) the block's own tiles are read again at the background only while their correlation at
+    32 px is weak."""
+    engine = DisparityEngine(96, 128, device="cpu")
+    engine.tp.load(torch.zeros(4, 96, 128))
+    found = block_map()
+    for value, reread in ((0.6, False), (0.1, True)):
+        engine.volume.reset()
+        j = round((32.0 - engine.volume.d_min) / engine.volume.step)
+        engine.volume.values[:, 10:, j] = value
+        assert (engine._unhide(engine.volume, found) > 0) == reread

@@ -2,8 +2,8 @@
 
 Per frame: (1) sparse search - every other tile in each direction correlated at targets spanning the range,
 every pass's lags read along each pair's axis into a cost volume (``volume.CostVolume``), aggregated over the
-sparse tile grid by SGM; (2) every tile correlated at that answer, read the same way within +-``reach`` px and
-aggregated over the full grid, then a full-range sweep of only the tiles whose choice is doubtful, then the
+sparse tile grid by SGM; (2) every tile correlated at that answer (a tile between sparse tiles also at its other
+sparse neighbours' answers), read the same way within +-``reach`` px and aggregated over the full grid, then a full-range sweep of only the tiles whose choice is doubtful, then the
 tiles beside a nearer surface read at the background around them with only the pairs whose cameras that
 surface does not hide (``occlusion.Occlusion``), chosen again;
 (3) refinement - re-correlation at target + residual (secant step on a sign flip) on the tiles that still move
@@ -21,6 +21,7 @@ import torch
 
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig
+from tpnet_gpu.disparity.grid import neighbourhood, settle, two_depth
 from tpnet_gpu.disparity.measure import CHUNK, Measurer, row_chunks
 from tpnet_gpu.disparity.occlusion import Occlusion, lowest
 from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs, default_pairs
@@ -35,25 +36,10 @@ SPARSE = 2
 # 12-bit raw data: rendered scenes have means of 1200-1800) are relative to the signal, for any bit depth.
 REFERENCE_LEVEL = 1500.0
 OFFSETS_STEP = 0.5  # px between the lags read along a pair's axis
-# A tile whose 3x3 neighbourhood of final disparities spans more than this sees two depths in its 16x16 window
-# (the neighbours' centres are 8 px away, inside it). On 24 rendered tuning scenes: precision 0.64 / recall 0.52
-# against the renderer's depth-edge tiles, 27 % of the flagged tiles gross vs 4 % of the rest (a second-peak
-# test reached a precision of 0.14-0.23). Their confidence is scaled by TWO_DEPTH_WEIGHT, which ranks them
-# below nearly every single-depth tile: gross among the most confident 90 % / 75 % of the measured tiles
-# 6.3 / 4.5 % -> 4.8 / 3.5 %.
-TWO_DEPTH_SPREAD = 1.0
+# Confidence of a tile flagged two-depth (grid.two_depth) is its strength scaled by TWO_DEPTH_WEIGHT, which ranks
+# them below nearly every single-depth tile: on 24 rendered tuning scenes, gross among the most confident 90 % /
+# 75 % of the measured tiles 6.3 / 4.5 % -> 4.8 / 3.5 %.
 TWO_DEPTH_WEIGHT = 0.25
-# A weak tile (strength < WEAK_STRENGTH) more than WEAK_OFF px from the strength-weighted mean of its surface in
-# its 3x3 neighbourhood (the tiles within SURFACE_BAND of the neighbourhood's median, at least SURFACE_MIN of the
-# 9) takes that mean (``settle``): its own peak is mostly noise. A weak tile off that surface moves only when it
-# is isolated (at most ISOLATED tiles of the 3x3, itself included, within SURFACE_BAND of it), so a structure one
-# tile wide (3 in a row) keeps its disparity. 36 rendered dev scenes (seeds 500-900, none held out), p2 = 0.35:
-# flat gross 0.71 -> 0.62 % (24 tuning scenes), 2.41 -> 2.25 % (12 check scenes); flat own-inlier RMSE
-# 0.094 -> 0.087 / 0.113 -> 0.105 px. SURFACE_BAND 1.0 -> 1.5 (with the occlusion step below; 2.0 measured
-# no better and a worse RMSE): a weak tile 1-1.5 px off its surface, its own peak pulled there by noise, was
-# left there (43 of the dev scenes' 598 gross flat tiles were 1-1.5 px off, 10 after): flat gross 0.37 -> 0.31 %
-# / 1.96 -> 1.91 %, flat own-inlier RMSE 0.0869 -> 0.0863 / 0.1066 -> 0.1067 px, all tiles either surface
-# 1.66 -> 1.55 % / 2.92 -> 2.83 %.
 # Beside a surface more than OCCLUSION_JUMP px nearer, a tile is tried again at the least disparity within
 # BACKGROUND_RADIUS tiles, read within +-UNHIDDEN_READ px of it with only the pairs whose cameras that surface
 # does not hide (occlusion.py); the result joins the volume and the aggregation chooses again. Without it, the
@@ -64,11 +50,22 @@ TWO_DEPTH_WEIGHT = 0.25
 OCCLUSION_JUMP = 4.0
 BACKGROUND_RADIUS = 3
 UNHIDDEN_READ = 1.0
-WEAK_STRENGTH = 0.3
-WEAK_OFF = 0.5
-SURFACE_BAND = 1.5
-SURFACE_MIN = 5
-ISOLATED = 2
+# A tile whose combined correlation (every pair) at its choice is >= SEEN_STRENGTH is seen by every camera there:
+# no nearer surface hides it, and the occlusion step leaves it alone. Read with the few pairs a nearby nearer
+# surface "does not hide", a true foreground tile beside its edge finds the background behind it (those cameras
+# see around the edge) and the aggregation took it there. 52 rendered dev scenes (seeds 500-1100, none held
+# out), with the other starts below: flat gross tiles 673 -> 663, all tiles either surface 1.66 -> 1.64 %.
+SEEN_STRENGTH = 0.3
+# Step (2) reads a tile between sparse tiles also at the answers of its other sparse neighbours (below, right,
+# diagonal) where they lie outside its first read (more than reach - 1 px from it), each answer only when at
+# least SUPPORT_MIN of its own 8 sparse neighbours agree within SUPPORT_BAND px (an isolated sparse answer is
+# mostly a false peak: read around, it spread). Without them an object's first row of tiles between sparse
+# tiles read only the background above it. Rendered dev scenes (seeds 500-1100, none held out), flat gross
+# tiles 24 tuning scenes 117 -> 88, 11 check scenes (900 #2's periodic alias aside) 79 -> 78, 16 new check
+# scenes 218 -> 139; all tiles either surface 1.51 -> 1.40 / 1.58 -> 1.37 %; flat own-inlier RMSE +0.0005 px;
+# +0.03-0.15 passes per frame. Unsupported answers read too: 800 #5 22 -> 37 tiles.
+SUPPORT_BAND = 1.0
+SUPPORT_MIN = 1
 
 
 @dataclass(frozen=True)
@@ -93,48 +90,6 @@ class DisparityResult:
     search: torch.Tensor
     margin: torch.Tensor
     tile_passes: float
-
-
-def neighbourhood(grid: torch.Tensor, size: int = 3) -> torch.Tensor:
-    """``(ty, tx, size * size)``: each tile's ``size`` x ``size`` neighbourhood (odd ``size``) of ``grid (ty, tx)``
-    in row order (NaN beyond the edge)."""
-    r = size // 2
-    padded = torch.nn.functional.pad(grid[None, None], (r, r, r, r), value=float("nan"))[0, 0]
-    return padded.unfold(0, size, 1).unfold(1, size, 1).reshape(*grid.shape, size * size)
-
-
-def weighted_mean(windows: torch.Tensor, weights: torch.Tensor, same: torch.Tensor):
-    """``(mean, total)``, each ``(ty, tx)``: the ``weights``-weighted mean of ``windows (ty, tx, n)`` over the
-    entries where ``same (ty, tx, n)`` holds (NaN entries must not), and the weight summed there (0: none, the
-    mean is then 0)."""
-    w = torch.where(same, weights, 0.0)
-    total = w.sum(dim=-1)
-    return (w * torch.nan_to_num(windows)).sum(dim=-1) / total.clamp(min=1e-12), total
-
-
-def two_depth(disparity: torch.Tensor) -> torch.Tensor:
-    """``(ty, tx)`` bool: measured tiles whose measured 3x3 neighbourhood spans more than ``TWO_DEPTH_SPREAD``."""
-    windows = neighbourhood(disparity)
-    finite = torch.isfinite(windows)
-    high = torch.where(finite, windows, torch.full_like(windows, -float("inf"))).amax(dim=-1)
-    low = torch.where(finite, windows, torch.full_like(windows, float("inf"))).amin(dim=-1)
-    return torch.isfinite(disparity) & (high - low > TWO_DEPTH_SPREAD)
-
-
-def settle(disparity: torch.Tensor, strength: torch.Tensor) -> torch.Tensor:
-    """``disparity (ty, tx)`` with each weak tile that lies more than ``WEAK_OFF`` px from its surface's
-    strength-weighted mean moved to that mean (see ``WEAK_STRENGTH``); strong tiles, tiles without a clear
-    surface around them and weak tiles on a structure of their own keep their measurement."""
-    windows = neighbourhood(disparity)
-    weights = neighbourhood(torch.where(torch.isfinite(disparity), strength, torch.zeros_like(strength)))
-    median = torch.nanmedian(windows, dim=-1, keepdim=True).values
-    same = (windows - median).abs() <= SURFACE_BAND  # False for NaN
-    mean, total = weighted_mean(windows, weights, same)
-    own = ((windows - disparity[..., None]).abs() <= SURFACE_BAND).sum(dim=-1)
-    on_surface = (disparity - median[..., 0]).abs() <= SURFACE_BAND
-    weak = (strength < WEAK_STRENGTH) & (same.sum(dim=-1) >= SURFACE_MIN) & ((disparity - mean).abs() > WEAK_OFF)
-    weak &= on_surface | (own <= ISOLATED)
-    return torch.where(weak & (total > 0), mean, disparity)
 
 
 def reference_scale(frames: torch.Tensor) -> torch.Tensor:
@@ -259,6 +214,14 @@ class DisparityEngine:
         # (2) every tile at that answer, aggregated with what (1) saw
         self._sweep(self.tp, [start], volume)
         passes += 1.0
+        read = [start]
+        for other in self._other_starts(coarse):  # (see SUPPORT_MIN)
+            apart = torch.stack([(other - r).abs() > cfg.reach - 1.0 for r in read]).all(dim=0)  # False for NaN
+            share = float(apart.float().mean())
+            if share > 0:
+                self._sweep(self.tp, [other], volume, active=apart)
+                passes += share
+            read.append(other)
         found, margin = self._choose(volume)
         # (3) tiles with a peak but a close rival (textureless tiles have no peak anywhere: not worth a sweep)
         doubtful = (margin < cfg.verify_margin) & (volume.at(found) >= cfg.verify_strength)
@@ -274,12 +237,26 @@ class DisparityEngine:
             found, margin = self._choose(volume)
         return found, margin, passes
 
+    def _other_starts(self, coarse: torch.Tensor) -> list[torch.Tensor]:
+        """Three ``(ty, tx)`` grids from the sparse grid's answers ``coarse``: for each tile, the answer of the
+        sparse tile below, right and diagonally below-right of it where the tile lies between sparse tiles in
+        that direction (else its own start, the sparse tile above-left); NaN where that answer lacks support
+        (see ``SUPPORT_MIN``) or beyond the last sparse row or column."""
+        ring = neighbourhood(coarse)
+        agree = ((ring - coarse[..., None]).abs() <= SUPPORT_BAND).sum(dim=-1) - 1  # itself excluded
+        supported = torch.where(agree >= SUPPORT_MIN, coarse, torch.full_like(coarse, float("nan")))
+        supported = torch.nn.functional.pad(supported[None, None], (0, 1, 0, 1), value=float("nan"))[0, 0]
+        rows, cols = (torch.arange(n, device=self.device) for n in self.grid)
+        return [supported[(rows + dy * (SPARSE - 1)) // SPARSE][:, (cols + dx * (SPARSE - 1)) // SPARSE]
+                for dy, dx in ((1, 0), (0, 1), (1, 1))]
+
     def _unhide(self, volume: CostVolume, found: torch.Tensor) -> float:
         """Add to ``volume`` each tile beside a nearer surface of ``found (ty, tx)`` read at the least disparity
         around it with the pairs that surface does not hide (see ``OCCLUSION_JUMP``); returns the share of tiles
         measured (0: none, the volume is unchanged)."""
         background = lowest(found, BACKGROUND_RADIUS)
-        near = torch.nonzero((found - background > OCCLUSION_JUMP).reshape(-1))[:, 0]  # (N,) flat tile numbers
+        near = (found - background > OCCLUSION_JUMP) & ~(volume.at(found) >= SEEN_STRENGTH)
+        near = torch.nonzero(near.reshape(-1))[:, 0]  # (N,) flat tile numbers
         if near.numel() == 0:
             return 0.0
         hidden = self.occlusion.hidden(found, background.reshape(-1)[near], near)  # (N, cams)

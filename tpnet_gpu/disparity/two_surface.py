@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import torch
 
-from tpnet_gpu.disparity.engine import neighbourhood
+from tpnet_gpu.disparity.grid import neighbourhood
 from tpnet_gpu.disparity.measure import axis_peak, row_chunks
 from tpnet_gpu.disparity.two_peaks import LobeFit
 
