@@ -25,7 +25,7 @@ import torch
 
 from tpnet_gpu.camera import Rig, grid_centres
 from tpnet_gpu.disparity.engine import DisparityEngine, correlation_for, reference_scale
-from tpnet_gpu.disparity.grid import neighbourhood
+from tpnet_gpu.disparity.grid import ring_median
 from tpnet_gpu.disparity.measure import Peak2D, row_chunks
 from tpnet_gpu.disparity.pairs import combine_pairs
 from tpnet_gpu.flow_align import Alignment
@@ -230,14 +230,7 @@ class FlowEstimator:
 
     def neighbour_median(self, flow: torch.Tensor, least: int = 1) -> torch.Tensor:
         """``(T, 2)`` median of each tile's measured 8 neighbours' flow ``(T, 2)``; NaN with fewer than ``least``."""
-        medians = []
-        for c in range(2):
-            windows = neighbourhood(flow[:, c].reshape(self.grid))
-            ring = torch.cat([windows[..., :4], windows[..., 5:]], dim=-1)
-            few = torch.isfinite(ring).sum(dim=-1) < least
-            median = torch.nanmedian(ring, dim=-1).values
-            medians.append(torch.where(few, torch.full_like(median, float("nan")), median).reshape(-1))
-        return torch.stack(medians, dim=-1)
+        return torch.stack([ring_median(flow[:, c].reshape(self.grid), least).reshape(-1) for c in range(2)], dim=-1)
 
     def consistency(self, flow: torch.Tensor, strength: torch.Tensor):
         """Tiles more than ``outlier`` px from their 8 neighbours' median flow (or unmeasured, with measured

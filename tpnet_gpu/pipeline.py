@@ -56,10 +56,10 @@ class FrameResult:
 
     Attributes:
         disparity: ``(tiles_y, tiles_x)`` final disparity, px (TPNET's after its context step where the pipeline
-            has weights for its rig, ``Pipeline.weights``, else the engine's); NaN where the engine trusted no
-            measurement.
+            has weights for its rig, ``Pipeline.weights``, else the engine's); NaN where the engine gave none (it
+            trusted no measurement and had no clear first-stage answer on the tile's surface: grid.fill).
         confidence: ``(tiles_y, tiles_x)`` the engine's confidence (its final correlation peak's strength,
-            scaled down on two-depth tiles; higher = surer), 0 = none.
+            scaled down on two-depth tiles; higher = surer), 0 = none (NaN tiles and tiles grid.fill gave).
         two_depth: ``(tiles_y, tiles_x)`` bool: the tile's window straddles two depths (its neighbours'
             disparities span more than 1 px): flagged, not a surface to trust (grid.two_depth).
         initial: ``(tiles_y, tiles_x)`` the engine's disparities the network read its layers at (NaN = none).

@@ -4,7 +4,7 @@ window at stride 8) and hand-computed strength-weighted means; exact up to float
 import pytest
 import torch
 
-from tpnet_gpu.disparity.grid import settle, two_depth
+from tpnet_gpu.disparity.grid import fill, settle, two_depth
 
 
 def test_two_depth_flags_tiles_beside_a_depth_step():
@@ -49,3 +49,34 @@ def test_settle_moves_only_weak_outliers_on_a_surface():
     unchanged = torch.ones(7, 9, dtype=torch.bool)
     unchanged[2, 2] = unchanged[0, 0] = unchanged[5, 4] = False
     assert torch.equal(settled[unchanged], grid[unchanged])
+
+
+def test_fill_gives_unmeasured_tiles_their_surface_where_the_first_stage_was_clear():
+    """Oracle: hand-computed strength-weighted means. On a plane at 3.0 px with 0.2 px stripes (strengths 0.2 and
+    0.6), an unmeasured tile whose clear first-stage answer (3.3) agrees with its neighbours takes the
+    strength-weighted mean of the 8 of them; beside a 9 px block only the neighbours within 1 px of its answer
+    count; an unclear answer, or one more than 1 px from the neighbours' median (5.0), leaves NaN; measured tiles
+    keep their values."""
+    grid = torch.full((6, 8), 3.0)
+    grid[:, ::2] += 0.2
+    strength = torch.where(torch.arange(8) % 2 == 0, 0.6, 0.2).expand(6, 8).clone()
+    grid[:, 6:] = 9.0
+    search = torch.full((6, 8), 3.3)
+    clear = torch.ones(6, 8, dtype=torch.bool)
+    holes = [(2, 2), (2, 5), (4, 3), (1, 3)]
+    for y, x in holes:
+        grid[y, x] = float("nan")
+    search[4, 3] = 5.0  # disagrees with the neighbours' median (3.0-3.2)
+    clear[1, 3] = False
+    filled = fill(grid, strength, search, clear)
+
+    def mean_near(y, x, answer):
+        near = [(float(grid[v, u]), float(strength[v, u])) for v in (y - 1, y, y + 1) for u in (x - 1, x, x + 1)
+                if (v, u) != (y, x) and abs(float(grid[v, u]) - answer) <= 1.0]
+        return sum(g * w for g, w in near) / sum(w for _, w in near)
+
+    assert filled[2, 2] == pytest.approx(mean_near(2, 2, 3.3), abs=1e-6)
+    assert filled[2, 5] == pytest.approx(mean_near(2, 5, 3.3), abs=1e-6)  # the 9 px column left out
+    assert torch.isnan(filled[4, 3]) and torch.isnan(filled[1, 3])
+    measured = torch.isfinite(grid)
+    assert torch.equal(filled[measured], grid[measured])

@@ -3,13 +3,15 @@
 Per frame: (1) sparse search - every other tile in each direction correlated at targets spanning the range,
 every pass's lags read along each pair's axis into a cost volume (``volume.CostVolume``), aggregated over the
 sparse tile grid by SGM; (2) every tile correlated at that answer (a tile between sparse tiles also at its other
-sparse neighbours' answers), read the same way within +-``reach`` px and aggregated over the full grid, then a full-range sweep of only the tiles whose choice is doubtful, then the
-tiles beside a nearer surface read at the background around them with only the pairs whose cameras that
-surface does not hide (``occlusion.Occlusion``), chosen again;
-(3) refinement - re-correlation at target + residual (secant step on a sign flip) on the tiles that still move
-(the processor's ``active`` mask, so a pass costs only those tiles), and a consistency pass: tiles that disagree
-with their neighbours' median are refined again from it. ``tile_passes`` counts tiles x cameras processed per
-frame in units of one full-resolution pass (a pass over a quarter of the tiles counts 1/4).
+sparse neighbours' answers), read the same way within +-``reach`` px and aggregated over the full grid, then a
+full-range sweep of only the tiles whose choice is doubtful, then the tiles beside a nearer surface read at the
+background around them with only the pairs whose cameras that surface does not hide (``occlusion.Occlusion``),
+chosen again; (3) refinement - re-correlation at target + residual (secant step on a sign flip) on the tiles
+that still move (the processor's ``active`` mask, so a pass costs only those tiles), and a consistency pass:
+tiles that disagree with their neighbours' median are refined again from it; (4) the tile grid: weak outliers
+onto their surface, unmeasured tiles with a clear first-stage answer filled from their surface (``grid``).
+``tile_passes`` counts tiles x cameras processed per frame in units of one full-resolution pass (a pass over a
+quarter of the tiles counts 1/4).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import torch
 
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig
-from tpnet_gpu.disparity.grid import neighbourhood, settle, two_depth
+from tpnet_gpu.disparity.grid import fill, neighbourhood, ring_median, settle, two_depth
 from tpnet_gpu.disparity.measure import CHUNK, Measurer, row_chunks
 from tpnet_gpu.disparity.occlusion import Occlusion, lowest
 from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs, default_pairs
@@ -73,8 +75,9 @@ class DisparityResult:
     """One frame's disparities, torch on the engine's device, ``(tiles_y, tiles_x)`` each.
 
     Attributes:
-        disparity: px, NaN where no measurement was trusted.
-        strength: the final measurement's correlation strength (0 where none).
+        disparity: px. Where refinement trusted no measurement: the first stage's answer if it was clear
+            (margin >= ``verify_margin``) and agrees with the measured neighbours (``grid.fill``), else NaN.
+        strength: the final measurement's correlation strength (0 where none: such tiles have confidence 0).
         confidence: ``strength``, scaled by ``TWO_DEPTH_WEIGHT`` on ``two_depth`` tiles (higher = surer).
         two_depth: bool, the tile's window straddles two depths (its neighbours' disparities span more than
             ``TWO_DEPTH_SPREAD``): its disparity is one of them or a blend, do not trust it as a surface.
@@ -334,6 +337,7 @@ class DisparityEngine:
         disparity, strength, more = self.consistency(disparity, strength)
         passes += more
         disparity = settle(disparity, strength)
+        disparity = fill(disparity, strength, found, margin >= self.config.verify_margin)  # strength 0 there
         flagged = two_depth(disparity)
         confidence = torch.where(flagged, TWO_DEPTH_WEIGHT * strength, strength)
         return DisparityResult(disparity, strength, confidence, flagged, found, margin, passes)
@@ -352,9 +356,7 @@ class DisparityEngine:
         """Tiles more than 1 px from their 8 neighbours' median (or unmeasured, with measured neighbours) are
         refined again from that median (only those tiles); the new result is kept where it is stronger. On 24
         rendered tuning scenes: flat tiles gross 1.10 -> 1.04 %, coverage 94.8 -> 95.1 %, +0.13 passes."""
-        windows = neighbourhood(disparity)
-        ring = torch.cat([windows[..., :4], windows[..., 5:]], dim=-1)
-        median = torch.nanmedian(ring, dim=-1).values
+        median = ring_median(disparity)
         suspect = torch.isfinite(median) & ~((disparity - median).abs() <= 1.0)
         if not bool(suspect.any()):
             return disparity, strength, 0.0

@@ -26,6 +26,15 @@ WEAK_OFF = 0.5
 SURFACE_BAND = 1.5
 SURFACE_MIN = 5
 ISOLATED = 2
+# A tile refinement left unmeasured, whose first-stage answer was clear and lies within FILL_BAND px of its
+# measured neighbours' median, takes the strength-weighted mean of those neighbours within FILL_BAND px of that
+# answer (``fill``; the answer itself, 0.5 px bins, raised the flat own-inlier RMSE 0.087 -> 0.099 px). Rendered
+# dev scenes (seeds 500-1100, none held out), 24 tuning / 16 check scenes, clear = margin >= verify_margin
+# (1.0): coverage flat 94.9 -> 98.2 % / 94.2 -> 97.5 %, edge 89.8 -> 93.6 / 90.0 -> 93.3 %, all 51.4 -> 54.9 /
+# 64.5 -> 68.3 % (the old loop: edge 92.9 / 93.9 %, all 55.3 / 68.2 %); flat gross 0.21 -> 0.23 / 0.40 ->
+# 0.42 %, all tiles either surface 1.40 -> 2.53 / 1.37 -> 1.83 %; flat own-inlier RMSE 0.0869 -> 0.0873 /
+# 0.0906 -> 0.0912 px. Margins of 0.5 / 0.75 covered more but took all tiles either to 4.9 / 3.7 %.
+FILL_BAND = 1.0
 
 
 def neighbourhood(grid: torch.Tensor, size: int = 3) -> torch.Tensor:
@@ -43,6 +52,28 @@ def weighted_mean(windows: torch.Tensor, weights: torch.Tensor, same: torch.Tens
     w = torch.where(same, weights, 0.0)
     total = w.sum(dim=-1)
     return (w * torch.nan_to_num(windows)).sum(dim=-1) / total.clamp(min=1e-12), total
+
+
+def ring_median(grid: torch.Tensor, least: int = 1) -> torch.Tensor:
+    """``(ty, tx)``: the median of each tile's 8 neighbours in ``grid (ty, tx)``, NaN ones left out (NaN where
+    fewer than ``least`` are finite)."""
+    windows = neighbourhood(grid)
+    ring = torch.cat([windows[..., :4], windows[..., 5:]], dim=-1)
+    median = torch.nanmedian(ring, dim=-1).values
+    return torch.where(torch.isfinite(ring).sum(dim=-1) < least, torch.full_like(median, float("nan")), median)
+
+
+def fill(disparity: torch.Tensor, strength: torch.Tensor, search: torch.Tensor, clear: torch.Tensor) -> torch.Tensor:
+    """``disparity (ty, tx)`` with each NaN tile filled where the first stage's answer ``search (ty, tx)`` is
+    ``clear (ty, tx)`` and lies within ``FILL_BAND`` px of the median of the tile's measured neighbours
+    (``ring_median``): with the ``strength (ty, tx)``-weighted mean of those neighbours within ``FILL_BAND`` px of
+    the answer (the answer itself where they weigh 0); other tiles unchanged."""
+    agrees = (search - ring_median(disparity)).abs() <= FILL_BAND  # False for NaN
+    windows = neighbourhood(disparity)
+    weights = neighbourhood(torch.where(torch.isfinite(disparity), strength, torch.zeros_like(strength)))
+    mean, total = weighted_mean(windows, weights, (windows - search[..., None]).abs() <= FILL_BAND)
+    value = torch.where(total > 0, mean, search)
+    return torch.where(torch.isnan(disparity) & clear & agrees, value, disparity)
 
 
 def two_depth(disparity: torch.Tensor) -> torch.Tensor:
