@@ -80,7 +80,7 @@ class DisparityResult:
         strength: the final measurement's correlation strength (0 where none: such tiles have confidence 0).
         confidence: ``strength``, scaled by ``TWO_DEPTH_WEIGHT`` on ``two_depth`` tiles (higher = surer).
         two_depth: bool, the tile's window straddles two depths (its neighbours' disparities span more than
-            ``TWO_DEPTH_SPREAD``): its disparity is one of them or a blend, do not trust it as a surface.
+            ``grid.TWO_DEPTH_SPREAD``): its disparity is one of them or a blend, do not trust it as a surface.
         search: the first stage's answer (before refinement), px.
         margin: the first stage's aggregated-cost margin to the best choice > 1 px away (larger = surer).
         tile_passes: tiles x cameras processed, in full-resolution passes.
