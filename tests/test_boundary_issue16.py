@@ -104,11 +104,14 @@ def test_issue16_masked_array_mask_is_honoured_as_nan(frames):
     nan_frames = frames.copy()
     nan_frames[1, 10:14, 20:30] = np.nan
     want = tp.process(nan_frames, 0.5)
-    want = {k: getattr(want, k).clone() for k in ("corr", "valid")}
+    want = {k: getattr(want, k).clone() for k in ("corr", "valid", "finite")}
     masked = np.ma.masked_array(frames, mask=np.isnan(nan_frames))
     got = tp.process(masked, 0.5)
     assert not want["valid"].all() and torch.equal(got.valid, want["valid"])
+    assert not want["finite"].all() and torch.equal(got.finite, want["finite"])
+    assert not (want["valid"] & ~want["finite"]).any()  # valid tiles read finite pixels
     torch.testing.assert_close(got.corr, want["corr"], rtol=0, atol=0)
+    assert tp.process(frames, 0.5).finite.all()  # no NaN: every tile's windows hold data (overwrites got)
     assert tp.process(np.ma.masked_array(frames.astype(np.uint16), mask=np.isnan(nan_frames)), 0.5).valid.equal(
         want["valid"])  # integer frames: masked pixels become NaN in a float copy
 

@@ -195,3 +195,20 @@ def test_first_row_of_an_object_between_sparse_tiles_is_read_at_the_object(monke
     stats = flat_stats(rendered, result.disparity)
     assert stats["coverage"] >= 0.9 and (stats["gross"] > 0.04) == fails, stats
     assert result.tile_passes <= BUDGET
+
+
+def test_tiles_reading_nan_pixels_are_not_filled():
+    """A 64x64 hole of NaN pixels in every camera of the quad's demo scene: ``grid.fill`` gives values only to
+    tiles whose windows hold data. Oracle: the tile processor's own validity of each filled tile's windows at its
+    disparity (its NaN masking is tested on its own, tests/test_boundary_issue16.py). Measured before the guard:
+    tile (15, 15), whose windows reach into the hole, was filled with its neighbours' 0.3 px."""
+    rendered = rendered_scene(RIGS["quad"])
+    frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
+    frames[:, 96:160, 128:192] = np.nan
+    engine = DisparityEngine(H, W, rig=RIGS["quad"], cfa=rendered.sensor.cfa, device="cpu")
+    result = engine.run(frames)
+    filled = torch.isfinite(result.disparity) & (result.strength == 0)
+    assert bool(filled.any())  # the fill still works away from the hole
+    finite = engine.tp.measure(torch.where(filled, result.disparity, result.search)).finite.view(engine.grid)
+    assert not bool((filled & ~finite).any()), torch.nonzero(filled & ~finite).tolist()
+    assert torch.isnan(result.disparity[13:19, 17:23]).all()  # tiles inside the hole

@@ -76,7 +76,8 @@ class DisparityResult:
 
     Attributes:
         disparity: px. Where refinement trusted no measurement: the first stage's answer if it was clear
-            (margin >= ``verify_margin``) and agrees with the measured neighbours (``grid.fill``), else NaN.
+            (margin >= ``verify_margin``), the tile's windows held finite pixels and it agrees with the measured
+            neighbours (``grid.fill``; strength 0 there), else NaN.
         strength: the final measurement's correlation strength (0 where none: such tiles have confidence 0).
         confidence: ``strength``, scaled by ``TWO_DEPTH_WEIGHT`` on ``two_depth`` tiles (higher = surer).
         two_depth: bool, the tile's window straddles two depths (its neighbours' disparities span more than
@@ -149,6 +150,9 @@ class DisparityEngine:
         self.measurer = Measurer(self.tp.pairs, self.sampler, config, widen=cfa is None)
         self.calibrated = not self.rig.is_ideal()
         self.sparse_tiles = torch.zeros(self.grid, dtype=torch.bool, device=self.device)
+        # per tile: its windows held data (finite pixels) in the last refinement pass that read it; only such
+        # tiles are filled (a tile reading masked or NaN pixels stays NaN, as the processor masks it)
+        self.read_finite = torch.zeros(self.grid, dtype=torch.bool, device=self.device)
         self.sparse_tiles[::SPARSE, ::SPARSE] = True
         self.all_tiles = torch.arange(self.tp.tiles, device=self.device)
         self.sparse_index = torch.nonzero(self.sparse_tiles.reshape(-1))[:, 0]  # (sparse tiles,) flat numbers
@@ -298,7 +302,9 @@ class DisparityEngine:
         for _ in range(cfg.refine_passes):
             if not bool(active.any()):
                 break
-            corr = self.measure_at(self.tp, torch.nan_to_num(t, nan=0.0), active=active).corr
+            measured = self.measure_at(self.tp, torch.nan_to_num(t, nan=0.0), active=active)
+            corr = measured.corr
+            self.read_finite.logical_and_(~active).logical_or_(active & measured.finite.view(t.shape))
             passes += float(active.sum()) / tiles
             d, s = self.measurer.measure(corr, active.reshape(-1))
             d, s = d.reshape(t.shape), s.reshape(t.shape)
@@ -330,6 +336,7 @@ class DisparityEngine:
         """The whole engine on one frame ``(cams, H, W)`` (torch on any device or NumPy, any real dtype)."""
         frames_t = self.normalise(frames)
         self.tp.load(frames_t)
+        self.read_finite.fill_(False)
         found, margin, passes = self.search()
         disparity, strength, refine_passes = self.refine(found)
         passes += refine_passes
@@ -337,7 +344,7 @@ class DisparityEngine:
         disparity, strength, more = self.consistency(disparity, strength)
         passes += more
         disparity = settle(disparity, strength)
-        disparity = fill(disparity, strength, found, margin >= self.config.verify_margin)  # strength 0 there
+        disparity = fill(disparity, strength, found, (margin >= self.config.verify_margin) & self.read_finite)
         flagged = two_depth(disparity)
         confidence = torch.where(flagged, TWO_DEPTH_WEIGHT * strength, strength)
         return DisparityResult(disparity, strength, confidence, flagged, found, margin, passes)

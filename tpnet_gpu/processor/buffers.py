@@ -36,6 +36,8 @@ class TileResult:
             ``layout.PIXEL_LIMIT`` = 2^50 in magnitude), every window wholly inside the image and none of them
             featureless (all its pixels equal: tile_processor.md §1.4, §6.7). Tiles with windows partly off the image still get values computed from pair-clamped
             pixels; tiles with non-finite input or inactive tiles get zero correlations.
+        finite: ``(tiles,)`` bool: active, every centre and window pixel finite (``valid`` without the
+            inside-the-image and featureless conditions: the tile's windows hold data).
         centres: ``(tiles, cams, 2)`` the per-camera tile centres (x, y) used, pixels.
         texture: ``(4, H, W)`` R, G, B, alpha (mono: ``(2, H, W)`` Y, alpha) overlap-added textures of the
             tiles with finite input, or None unless the processor was built with ``textures=True``. Colours are
@@ -47,6 +49,7 @@ class TileResult:
     corr: torch.Tensor
     layers: torch.Tensor | None
     valid: torch.Tensor
+    finite: torch.Tensor
     centres: torch.Tensor
     texture: torch.Tensor | None
 
@@ -144,6 +147,7 @@ class Buffers:
             corr=t(self.corr).view(tiles, npairs, CORR_SIDE, CORR_SIDE),
             layers=None if self.layers is None else t(self.layers),
             valid=t(self.valid),
+            finite=t(self.finite),
             centres=t(self.centres),
             texture=texture_view,
         )
