@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import torch
 
-from tpnet_gpu.disparity.grid import neighbourhood, weighted_mean
+from tpnet_gpu.disparity.grid import surface_mean
 
 # px: the neighbours within this of a tile count as its surface. Measured with the v4 weights, one pass, on 32
 # rendered 640x480 scenes of seeds 20000+ (neither training nor held out; bench/bench_network_context.py),
@@ -34,9 +34,5 @@ def context_step(disparity: torch.Tensor, strength: torch.Tensor) -> torch.Tenso
     if disparity.dim() != 2 or strength.shape != disparity.shape:
         raise ValueError(f"strength: expected the shape of disparity, a (tiles_y, tiles_x) grid "
                          f"{tuple(disparity.shape)}, got {tuple(strength.shape)}")
-    finite = torch.isfinite(disparity)
-    windows = neighbourhood(disparity)  # (ty, tx, 9), NaN beyond the frame
-    weights = neighbourhood(torch.where(finite, strength, 0.0))
-    same = (windows - disparity[..., None]).abs() <= CONTEXT_BAND  # False for NaN
-    mean, total = weighted_mean(windows, weights, same)
-    return torch.where(finite & (total > 0), mean, disparity)
+    mean, total = surface_mean(disparity, strength, disparity, CONTEXT_BAND)
+    return torch.where(torch.isfinite(disparity) & (total > 0), mean, disparity)

@@ -157,6 +157,11 @@ class DisparityEngine:
         self.all_tiles = torch.arange(self.tp.tiles, device=self.device)
         self.sparse_index = torch.nonzero(self.sparse_tiles.reshape(-1))[:, 0]  # (sparse tiles,) flat numbers
         self.sparse_grid = tuple((n + SPARSE - 1) // SPARSE for n in self.grid)
+        # per tile, the (row, column) of its sparse neighbour below, right and below-right in the sparse grid
+        # padded by one NaN row and column (``_other_starts``): fixed by the grid, made once
+        rows, cols = (torch.arange(n, device=self.device) for n in self.grid)
+        self.other_index = [((rows + dy * (SPARSE - 1)) // SPARSE, (cols + dx * (SPARSE - 1)) // SPARSE)
+                            for dy, dx in ((1, 0), (0, 1), (1, 1))]
         self.sparse_share = float(self.sparse_tiles.float().mean())
         # the cost volumes, (tiles_y, tiles_x, bins) and that of the sparse grid: allocated once, reset per frame
         lo, hi = config.d_min - config.reach, self.d_max + config.reach
@@ -253,9 +258,7 @@ class DisparityEngine:
         agree = ((ring - coarse[..., None]).abs() <= SUPPORT_BAND).sum(dim=-1) - 1  # itself excluded
         supported = torch.where(agree >= SUPPORT_MIN, coarse, torch.full_like(coarse, float("nan")))
         supported = torch.nn.functional.pad(supported[None, None], (0, 1, 0, 1), value=float("nan"))[0, 0]
-        rows, cols = (torch.arange(n, device=self.device) for n in self.grid)
-        return [supported[(rows + dy * (SPARSE - 1)) // SPARSE][:, (cols + dx * (SPARSE - 1)) // SPARSE]
-                for dy, dx in ((1, 0), (0, 1), (1, 1))]
+        return [supported[rows][:, cols] for rows, cols in self.other_index]
 
     def _unhide(self, volume: CostVolume, found: torch.Tensor) -> float:
         """Add to ``volume`` each tile beside a nearer surface of ``found (ty, tx)`` read at the least disparity

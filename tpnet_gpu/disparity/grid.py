@@ -54,6 +54,15 @@ def weighted_mean(windows: torch.Tensor, weights: torch.Tensor, same: torch.Tens
     return (w * torch.nan_to_num(windows)).sum(dim=-1) / total.clamp(min=1e-12), total
 
 
+def surface_mean(disparity: torch.Tensor, strength: torch.Tensor, centre: torch.Tensor, band: float):
+    """``(mean, total)``, each ``(ty, tx)``: the ``strength``-weighted mean of the finite tiles of each tile's 3x3
+    neighbourhood of ``disparity (ty, tx)`` (itself included) within ``band`` px of ``centre (ty, tx)``, and
+    their summed weight (``weighted_mean``; 0: none)."""
+    windows = neighbourhood(disparity)
+    weights = neighbourhood(torch.where(torch.isfinite(disparity), strength, torch.zeros_like(strength)))
+    return weighted_mean(windows, weights, (windows - centre[..., None]).abs() <= band)  # False for NaN
+
+
 def ring_median(grid: torch.Tensor, least: int = 1) -> torch.Tensor:
     """``(ty, tx)``: the median of each tile's 8 neighbours in ``grid (ty, tx)``, NaN ones left out (NaN where
     fewer than ``least`` are finite)."""
@@ -69,9 +78,7 @@ def fill(disparity: torch.Tensor, strength: torch.Tensor, search: torch.Tensor, 
     (``ring_median``): with the ``strength (ty, tx)``-weighted mean of those neighbours within ``FILL_BAND`` px of
     the answer (the answer itself where they weigh 0); other tiles unchanged."""
     agrees = (search - ring_median(disparity)).abs() <= FILL_BAND  # False for NaN
-    windows = neighbourhood(disparity)
-    weights = neighbourhood(torch.where(torch.isfinite(disparity), strength, torch.zeros_like(strength)))
-    mean, total = weighted_mean(windows, weights, (windows - search[..., None]).abs() <= FILL_BAND)
+    mean, total = surface_mean(disparity, strength, search, FILL_BAND)
     value = torch.where(total > 0, mean, search)
     return torch.where(torch.isnan(disparity) & clear & agrees, value, disparity)
 
