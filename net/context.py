@@ -35,4 +35,4 @@ def context_step(disparity: torch.Tensor, strength: torch.Tensor) -> torch.Tenso
         raise ValueError(f"strength: expected the shape of disparity, a (tiles_y, tiles_x) grid "
                          f"{tuple(disparity.shape)}, got {tuple(strength.shape)}")
     mean, total = surface_mean(disparity, strength, disparity, CONTEXT_BAND)
-    return torch.where(torch.isfinite(disparity) & (total > 0), mean, disparity)
+    return torch.where(total > 0, mean, disparity)  # a NaN tile has no neighbour within the band: total 0

@@ -59,7 +59,7 @@ def surface_mean(disparity: torch.Tensor, strength: torch.Tensor, centre: torch.
     neighbourhood of ``disparity (ty, tx)`` (itself included) within ``band`` px of ``centre (ty, tx)``, and
     their summed weight (``weighted_mean``; 0: none)."""
     windows = neighbourhood(disparity)
-    weights = neighbourhood(torch.where(torch.isfinite(disparity), strength, torch.zeros_like(strength)))
+    weights = neighbourhood(torch.where(torch.isfinite(disparity), strength, 0.0))
     return weighted_mean(windows, weights, (windows - centre[..., None]).abs() <= band)  # False for NaN
 
 
