@@ -52,6 +52,43 @@ def test_pipeline_measures_the_plane_on_device(frames, weights, device, monkeypa
     assert result.valid.cpu().numpy()[1:-1, 1:-1].all() and (result.confidence.cpu().numpy()[1:-1, 1:-1] > 0.1).all()
 
 
+@pytest.mark.parametrize("passes", [1, 2])
+def test_network_passes_read_only_the_tiles_the_result_depends_on(frames, weights, passes, monkeypatch):
+    """Issue 14: a network pass reads (re-correlates) only the tiles within 2 tiles (stage 2's 5x5) of a measured
+    tile per pass still to run; the others' answers are NaN in the result. Oracle: the same pipeline with every
+    tile read on every pass (grow patched to give every tile) - identical results; and the tiles read: the
+    measured tiles' square neighbourhoods (a left part of the frame made flat, so there are unmeasured tiles)."""
+    from tpnet_gpu import pipeline as pipeline_module  # noqa: PLC0415
+
+    flat = frames.clone()
+    flat[:, :, :64] = flat[:, :, 64:].mean()  # no texture: no peak, unmeasured tiles
+    config = PipelineConfig(network_passes=passes)
+    pipe = Pipeline(RIG.height, RIG.width, weights=weights, device="cpu", max_disparity=12.0, config=config)
+    read = []
+    measure_at = pipe.engine.measure_at
+
+    def recording(tp, target, active=None):
+        read.append(None if active is None else active.clone())
+        return measure_at(tp, target, active=active)
+
+    monkeypatch.setattr(pipe.engine, "measure_at", recording)
+    result = pipe.process(flat)
+    names = ("disparity", "confidence", "initial", "texture", "search")
+    masked = {name: getattr(result, name).clone() for name in names}  # views, valid until the next frame
+    network_reads = read[-passes:]
+    measured = torch.isfinite(masked["initial"])
+    assert (~measured).sum() >= 8 and measured.sum() >= 8
+    for done, active in enumerate(network_reads):
+        radius = 2 * (passes - done)
+        expected = torch.nn.functional.max_pool2d(measured.float()[None, None], 2 * radius + 1, 1, radius)[0, 0] > 0
+        assert torch.equal(active, expected)
+    assert not network_reads[0].all()  # some tiles are skipped
+    monkeypatch.setattr(pipeline_module, "grow", lambda mask, *_: torch.ones_like(mask))
+    full = pipe.process(flat)
+    for name in names:
+        assert torch.equal(masked[name].nan_to_num(-1e9), getattr(full, name).nan_to_num(-1e9)), name
+
+
 def test_stream_and_flat_memory(frames, weights):
     import resource
 

@@ -24,10 +24,12 @@ import torch
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import EngineConfig, TextureConfig
 from tpnet_gpu.disparity.engine import DisparityEngine
+from tpnet_gpu.disparity.grid import grow
 from tpnet_gpu.disparity.two_surface import Surfaces, measure_surfaces
 from tpnet_gpu.net import infer
 from tpnet_gpu.net.context import context_step
 from tpnet_gpu.net.layers import NetworkLayers, lags_match
+from tpnet_gpu.net.neighbours import CLUSTER_RADIUS
 from tpnet_gpu.processor import TileProcessor
 
 log = logging.getLogger(__name__)
@@ -65,7 +67,9 @@ class FrameResult:
         initial: ``(tiles_y, tiles_x)`` the engine's disparities the network read its layers at (NaN = none).
         search: ``(tiles_y, tiles_x)`` the engine's first-stage answer (finite everywhere): where ``initial`` is
             NaN the network and the texture read the tile there.
-        valid: ``(tiles_y, tiles_x)`` bool: the tile's windows were inside the image and finite.
+        valid: ``(tiles_y, tiles_x)`` bool: the tile's windows were inside the image and finite, as the last pass
+            read them (the texture's reads every tile; without textures, tiles that pass did not read are False:
+            the network's reads the tiles within 2 of a measured tile, the engine's those still refined).
         texture: ``(channels, H, W)`` R, G, B (or Y), alpha at the final disparity, or None.
         tile_passes: tiles x cameras processed for the disparity, in full-resolution passes.
         surfaces: with ``PipelineConfig.two_surface``: ``Surfaces`` (foreground, background disparities and
@@ -119,6 +123,9 @@ class Pipeline:
         self.grid = self.engine.grid
         self.model = None
         self.network_tp = None
+        # the network passes' tile masks (grid.grow's buffers), made once
+        self._near = torch.zeros(self.grid, dtype=torch.bool, device=self.device)
+        self._scratch = torch.zeros_like(self._near)
         self.layers = NetworkLayers(self.engine.rig.offsets, tp.pairs, self.device)
         self.weights = self._weights(weights, tp.colours)
         if self.weights is not None:
@@ -171,8 +178,11 @@ class Pipeline:
                 tp.load(self.engine.normalise(frames, out=tp.staging))
             # tiles the refinement left unmeasured are read at the first stage's answer (always finite)
             target = torch.where(measured, initial, result.search)
-            for _ in range(cfg.network_passes):
-                layers = self.layers.of(self.engine.measure_at(tp, target))
+            for done in range(cfg.network_passes):
+                # only the tiles a measured tile's final answer depends on: stage 2 reads CLUSTER_RADIUS tiles
+                # around, once per pass still to run (the others' answers are NaN in the result; same values)
+                near = grow(measured, CLUSTER_RADIUS * (cfg.network_passes - done), self._near, self._scratch)
+                layers = self.layers.of(self.engine.measure_at(tp, target, active=near))
                 target = self._infer(self.model, layers, target, grid=self.grid)
             # the context step after the last pass (net/context.py: between passes the next pass undid it)
             disparity = context_step(torch.where(measured, target, torch.full_like(target, float("nan"))),

@@ -4,7 +4,7 @@ window at stride 8) and hand-computed strength-weighted means; exact up to float
 import pytest
 import torch
 
-from tpnet_gpu.disparity.grid import fill, settle, two_depth
+from tpnet_gpu.disparity.grid import fill, grow, settle, two_depth
 
 
 def test_two_depth_flags_tiles_beside_a_depth_step():
@@ -80,3 +80,17 @@ def test_fill_gives_unmeasured_tiles_their_surface_where_the_first_stage_was_cle
     assert torch.isnan(filled[4, 3]) and torch.isnan(filled[1, 3])
     measured = torch.isfinite(grid)
     assert torch.equal(filled[measured], grid[measured])
+
+
+@pytest.mark.parametrize("radius", [0, 1, 2, 4, 9])
+def test_grow_is_a_square_dilation(radius):
+    """Oracle: torch's max pooling over a (2 radius + 1)^2 window (zero padding) of a random sparse mask; grids
+    narrower than the square included; the result is written into the given buffer."""
+    g = torch.Generator().manual_seed(radius)
+    for shape in [(9, 13), (1, 6), (30, 21)]:
+        mask = torch.rand(shape, generator=g) < 0.05
+        mask[shape[0] // 2, shape[1] // 3] = True
+        out, scratch = torch.empty(shape, dtype=torch.bool), torch.empty(shape, dtype=torch.bool)
+        expected = torch.nn.functional.max_pool2d(mask.float()[None, None], 2 * radius + 1, 1, radius)[0, 0] > 0
+        assert grow(mask, radius, out, scratch) is out
+        assert torch.equal(out, expected)

@@ -45,6 +45,17 @@ def neighbourhood(grid: torch.Tensor, size: int = 3) -> torch.Tensor:
     return padded.unfold(0, size, 1).unfold(1, size, 1).reshape(*grid.shape, size * size)
 
 
+def grow(mask: torch.Tensor, radius: int, out: torch.Tensor, scratch: torch.Tensor) -> torch.Tensor:
+    """``out (ty, tx)`` bool: the tiles within ``radius`` tiles (Chebyshev distance) of a True tile of ``mask
+    (ty, tx)``, made in place in ``out`` and ``scratch`` (bool buffers like ``mask``): no new tensor per frame."""
+    for source, into, axis in ((mask, scratch, 1), (scratch, out, 0)):  # rows, then columns: a square
+        into.copy_(source)
+        for s in range(1, min(radius, source.shape[axis] - 1) + 1):
+            into.narrow(axis, s, source.shape[axis] - s).logical_or_(source.narrow(axis, 0, source.shape[axis] - s))
+            into.narrow(axis, 0, source.shape[axis] - s).logical_or_(source.narrow(axis, s, source.shape[axis] - s))
+    return out
+
+
 def weighted_mean(windows: torch.Tensor, weights: torch.Tensor, same: torch.Tensor):
     """``(mean, total)``, each ``(ty, tx)``: the ``weights``-weighted mean of ``windows (ty, tx, n)`` over the
     entries where ``same (ty, tx, n)`` holds (NaN entries must not), and the weight summed there (0: none, the
