@@ -90,8 +90,8 @@ def spectrum_row(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.te
         for kx in ti.static(range(N)):
             for q in ti.static(range(4)):
                 x[q, kx] = x_rb[q, kx] * lpf_rb[ky, kx] + x[q, kx]
-    # The 8 norms of the row as one vector (1/sqrt vectorises; ~7 % of a pass on CPU, tile_processor.md §10); the scaled
-    # scalar form only where the unscaled squares could under- or overflow, NaN, or 0.
+    # The 8 norms of the row as one vector (1/sqrt vectorises; ~7 % of a pass on CPU, tile_processor.md §10);
+    # the scaled scalar form only where the unscaled squares could under- or overflow, NaN, or 0.
     energy = ti.Vector([fat_zero * fat_zero + x[0, kx] * x[0, kx] + x[1, kx] * x[1, kx] + x[2, kx] * x[2, kx]
                         + x[3, kx] * x[3, kx] for kx in ti.static(range(N))])
     inv = 1.0 / ti.sqrt(energy)
