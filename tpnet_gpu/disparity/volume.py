@@ -46,7 +46,8 @@ class CostVolume:
     def cost(self) -> torch.Tensor:
         """``(tiles_y, tiles_x, bins)`` matching cost 1 - correlation (clamped to [-1, 1]; 1 where not measured),
         in the volume's own buffer (valid until the next ``cost`` or ``choose``)."""
-        cost = self._cost.copy_(self.values).masked_fill_(~torch.isfinite(self.values), 0.0)
+        # non-finite (not measured: -inf) -> 0 in place: no volume-sized mask
+        cost = self._cost.copy_(self.values).nan_to_num_(nan=0.0, posinf=0.0, neginf=0.0)
         return cost.clamp_(-1, 1).neg_().add_(1.0)  # 1 - c, the same rounding
 
     def choose(self, p1: float, p2: float) -> tuple[torch.Tensor, torch.Tensor]:
