@@ -23,7 +23,7 @@ import taichi as ti
 from tpnet_gpu import operators
 from tpnet_gpu.kernels.frames import CENTRE_LIMIT, HALF_WINDOW, WINDOW
 from tpnet_gpu.kernels.taichi_frames import window_corner
-from tpnet_gpu.kernels.taichi_types import F32_3D, U8_1D
+from tpnet_gpu.kernels.taichi_types import F32_3D, U8_1D, V8_2D
 from tpnet_gpu.layout import FLOAT32_MAX, PIXEL_LIMIT
 from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
 
@@ -154,27 +154,26 @@ def forward_colour(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32, m
 def store_clt(g: ti.template(), kernels: ti.template(), kb: ti.i32, use_kernels: ti.i32, dest: ti.template(),
               out: ti.i32):
     """Write ``g``'s 4 quadrants to dest[out + q], times the aberration kernel kernels[kb + q] (bicomplex, §5.2)
-    when ``use_kernels``."""
+    when ``use_kernels``; ``dest`` and ``kernels`` a row at a time (rows of 8 as vectors, taichi_types.V8)."""
     for ky in range(N):
-        for kx in ti.static(range(N)):
-            f0 = g[ky, kx]  # CC
-            f1 = g[ky, N + kx]  # SC (horizontal sine)
-            f2 = g[N + ky, kx]  # CS (vertical sine)
-            f3 = g[N + ky, N + kx]  # SS
-            if use_kernels:
-                k0 = kernels[kb + 0, ky, kx]
-                k1 = kernels[kb + 1, ky, kx]
-                k2 = kernels[kb + 2, ky, kx]
-                k3 = kernels[kb + 3, ky, kx]
-                dest[out + 0, ky, kx] = k0 * f0 - k1 * f1 - k2 * f2 + k3 * f3
-                dest[out + 1, ky, kx] = k0 * f1 + k1 * f0 - k2 * f3 - k3 * f2
-                dest[out + 2, ky, kx] = k0 * f2 + k2 * f0 - k1 * f3 - k3 * f1
-                dest[out + 3, ky, kx] = k0 * f3 + k3 * f0 + k1 * f2 + k2 * f1
-            else:
-                dest[out + 0, ky, kx] = f0
-                dest[out + 1, ky, kx] = f1
-                dest[out + 2, ky, kx] = f2
-                dest[out + 3, ky, kx] = f3
+        f0 = ti.Vector([g[ky, kx] for kx in ti.static(range(N))])  # CC
+        f1 = ti.Vector([g[ky, N + kx] for kx in ti.static(range(N))])  # SC (horizontal sine)
+        f2 = ti.Vector([g[N + ky, kx] for kx in ti.static(range(N))])  # CS (vertical sine)
+        f3 = ti.Vector([g[N + ky, N + kx] for kx in ti.static(range(N))])  # SS
+        if use_kernels:
+            k0 = kernels[kb + 0, ky]
+            k1 = kernels[kb + 1, ky]
+            k2 = kernels[kb + 2, ky]
+            k3 = kernels[kb + 3, ky]
+            dest[out + 0, ky] = k0 * f0 - k1 * f1 - k2 * f2 + k3 * f3
+            dest[out + 1, ky] = k0 * f1 + k1 * f0 - k2 * f3 - k3 * f2
+            dest[out + 2, ky] = k0 * f2 + k2 * f0 - k1 * f3 - k3 * f1
+            dest[out + 3, ky] = k0 * f3 + k3 * f0 + k1 * f2 + k2 * f1
+        else:
+            dest[out + 0, ky] = f0
+            dest[out + 1, ky] = f1
+            dest[out + 2, ky] = f2
+            dest[out + 3, ky] = f3
 
 
 @ti.func
@@ -191,14 +190,14 @@ def convert_tiles(
     centres: F32_3D,
     active: U8_1D,
     masks: F32_3D,
-    kernels: F32_3D,
+    kernels: V8_2D,
     kernel_rows: ti.i32,
     kernel_cols: ti.i32,
     use_kernels: ti.i32,
     image_height: ti.i32,
     image_width: ti.i32,
     colours: ti.i32,
-    clt: F32_3D,
+    clt: V8_2D,
     finite: U8_1D,
     valid: U8_1D,
 ):

@@ -22,7 +22,7 @@ import taichi as ti
 
 from tpnet_gpu import operators
 from tpnet_gpu.kernels.correlate import CORR_SIDE, NET_CROP
-from tpnet_gpu.kernels.taichi_types import F32_1D, F32_2D, F32_3D, F32_4D, I32_1D, I32_2D, U8_1D
+from tpnet_gpu.kernels.taichi_types import F32_1D, F32_2D, F32_3D, F32_4D, I32_1D, I32_2D, U8_1D, V8_1D, V8_2D
 from tpnet_gpu.layout import FLOAT32_MAX, NET_LAYERS, NET_SIDE
 from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
 
@@ -60,48 +60,57 @@ def spectrum_row(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.te
                  lpf_corr: ti.template(), ky: ti.i32):
     """(4, 8) [q, kx]: row ``ky`` of the normalised, low-passed correlation spectrum of the tiles at
     src[base_a + 4 positions[u] + q] and src[base_b + ...] over the used colours u (colour used[u], weight
-    weights[u]); ``has_rb``: R or B is among them (their sum is low-passed before green is added, §6.2)."""
-    x = ti.Matrix.zero(ti.f32, 4, N)
-    x_rb = ti.Matrix.zero(ti.f32, 4, N)
+    weights[u]); ``has_rb``: R or B is among them (their sum is low-passed before green is added, §6.2).
+    ``src``, ``lpf_rb`` and ``lpf_corr`` are read a row at a time (rows of 8 as vectors, taichi_types.V8): the
+    row's 8 frequencies are vector lanes throughout (the same arithmetic per frequency as one at a time)."""
+    x0 = ti.Vector.zero(ti.f32, N)
+    x1 = ti.Vector.zero(ti.f32, N)
+    x2 = ti.Vector.zero(ti.f32, N)
+    x3 = ti.Vector.zero(ti.f32, N)
+    r0 = ti.Vector.zero(ti.f32, N)
+    r1 = ti.Vector.zero(ti.f32, N)
+    r2 = ti.Vector.zero(ti.f32, N)
+    r3 = ti.Vector.zero(ti.f32, N)
     for u in range(used.shape[0]):
         ia = base_a + 4 * positions[u]
         ib = base_b + 4 * positions[u]
         w_rb = ti.select(has_rb != 0 and used[u] < 2, weights[u], 0.0)
         w = weights[u] - w_rb
-        for kx in ti.static(range(N)):
-            a0 = src[ia + 0, ky, kx]
-            a1 = src[ia + 1, ky, kx]
-            a2 = src[ia + 2, ky, kx]
-            a3 = src[ia + 3, ky, kx]
-            b0 = src[ib + 0, ky, kx]
-            b1 = src[ib + 1, ky, kx]
-            b2 = src[ib + 2, ky, kx]
-            b3 = src[ib + 3, ky, kx]
-            p = ti.Vector([a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3,  # conj(A) * B per frequency (§6.2)
-                           a0 * b1 - a1 * b0 + a2 * b3 - a3 * b2,
-                           a0 * b2 - a2 * b0 + a1 * b3 - a3 * b1,
-                           a0 * b3 + a3 * b0 - a1 * b2 - a2 * b1])
-            for q in ti.static(range(4)):
-                x[q, kx] += w * p[q]
-            if has_rb != 0:
-                for q in ti.static(range(4)):
-                    x_rb[q, kx] += w_rb * p[q]
+        a0, a1, a2, a3 = src[ia + 0, ky], src[ia + 1, ky], src[ia + 2, ky], src[ia + 3, ky]
+        b0, b1, b2, b3 = src[ib + 0, ky], src[ib + 1, ky], src[ib + 2, ky], src[ib + 3, ky]
+        p0 = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3  # conj(A) * B per frequency (§6.2)
+        p1 = a0 * b1 - a1 * b0 + a2 * b3 - a3 * b2
+        p2 = a0 * b2 - a2 * b0 + a1 * b3 - a3 * b1
+        p3 = a0 * b3 + a3 * b0 - a1 * b2 - a2 * b1
+        x0 += w * p0
+        x1 += w * p1
+        x2 += w * p2
+        x3 += w * p3
+        if has_rb != 0:
+            r0 += w_rb * p0
+            r1 += w_rb * p1
+            r2 += w_rb * p2
+            r3 += w_rb * p3
     if has_rb != 0:  # without R and B this adds 0 * lpf_rb: skipped
-        for kx in ti.static(range(N)):
-            for q in ti.static(range(4)):
-                x[q, kx] = x_rb[q, kx] * lpf_rb[ky, kx] + x[q, kx]
-    # The 8 norms of the row as one vector (1/sqrt vectorises; ~7 % of a pass on CPU, tile_processor.md §10);
-    # the scaled scalar form only where the unscaled squares could under- or overflow, NaN, or 0.
-    energy = ti.Vector([fat_zero * fat_zero + x[0, kx] * x[0, kx] + x[1, kx] * x[1, kx] + x[2, kx] * x[2, kx]
-                        + x[3, kx] * x[3, kx] for kx in ti.static(range(N))])
+        low = lpf_rb[ky]
+        x0 = r0 * low + x0
+        x1 = r1 * low + x1
+        x2 = r2 * low + x2
+        x3 = r3 * low + x3
+    # The 8 norms as one vector (a packed 1/sqrt; ~7 % of a pass on CPU, tile_processor.md §10); the scaled
+    # scalar form only where the unscaled squares could under- or overflow, NaN, or 0.
+    energy = fat_zero * fat_zero + x0 * x0 + x1 * x1 + x2 * x2 + x3 * x3
     inv = 1.0 / ti.sqrt(energy)
     for kx in ti.static(range(N)):
         if not (energy[kx] >= 1e-30 and energy[kx] <= 1e37):
-            inv[kx] = inverse_norm(x[0, kx], x[1, kx], x[2, kx], x[3, kx], fat_zero)
+            inv[kx] = inverse_norm(x0[kx], x1[kx], x2[kx], x3[kx], fat_zero)
+    scale = inv * lpf_corr[ky]
+    x = ti.Matrix.zero(ti.f32, 4, N)
     for kx in ti.static(range(N)):
-        scale = inv[kx] * lpf_corr[ky, kx]
-        for q in ti.static(range(4)):
-            x[q, kx] = x[q, kx] * scale
+        x[0, kx] = x0[kx] * scale[kx]
+        x[1, kx] = x1[kx] * scale[kx]
+        x[2, kx] = x2[kx] * scale[kx]
+        x[3, kx] = x3[kx] * scale[kx]
     return x
 
 
@@ -171,7 +180,7 @@ def zero_correlations(corr: ti.template(), first: ti.i32, count: ti.i32):
 
 @ti.kernel
 def correlate_tiles(
-    clt: F32_3D,
+    clt: V8_2D,
     finite: U8_1D,
     pairs: I32_2D,
     cams: ti.i32,
@@ -179,8 +188,8 @@ def correlate_tiles(
     used: I32_1D,
     weights: F32_1D,
     fat_zero: ti.f32,
-    lpf_rb: F32_2D,
-    lpf_corr: F32_2D,
+    lpf_rb: V8_1D,
+    lpf_corr: V8_1D,
     unfold_index: I32_2D,
     unfold_sign: F32_2D,
     corr: F32_3D,

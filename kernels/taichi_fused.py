@@ -20,7 +20,7 @@ from tpnet_gpu.kernels.taichi_convert import (
     axis_basis, camera_window, forward_colour, kernel_base, store_clt, window_flags,
 )
 from tpnet_gpu.kernels.taichi_correlate import correlate_pair, tile_layers, zero_correlations
-from tpnet_gpu.kernels.taichi_types import F32_1D, F32_2D, F32_3D, F32_4D, I32_1D, I32_2D, U8_1D
+from tpnet_gpu.kernels.taichi_types import F32_1D, F32_2D, F32_3D, F32_4D, I32_1D, I32_2D, U8_1D, V8_1D, V8_2D
 from tpnet_gpu.layout import NET_LAYERS, NET_SIDE
 
 
@@ -46,7 +46,7 @@ def fused_tiles(
     centres: F32_3D,
     active: U8_1D,
     masks: F32_3D,
-    kernels: F32_3D,
+    kernels: V8_2D,
     kernel_rows: ti.i32,
     kernel_cols: ti.i32,
     use_kernels: ti.i32,
@@ -58,15 +58,15 @@ def fused_tiles(
     weights: F32_1D,
     pairs: I32_2D,
     fat_zero: ti.f32,
-    lpf_rb: F32_2D,
-    lpf_corr: F32_2D,
+    lpf_rb: V8_1D,
+    lpf_corr: V8_1D,
     unfold_index: I32_2D,
     unfold_sign: F32_2D,
     net_offset: ti.f32,
     with_layers: ti.template(),
     tasks: I32_1D,
     count: I32_1D,
-    scratch: F32_3D,
+    scratch: V8_2D,
     corr: F32_3D,
     layers: F32_4D,
     finite: U8_1D,

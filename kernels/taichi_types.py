@@ -9,3 +9,8 @@ F32_4D = ti.types.ndarray(dtype=ti.f32, ndim=4)
 I32_1D = ti.types.ndarray(dtype=ti.i32, ndim=1)
 I32_2D = ti.types.ndarray(dtype=ti.i32, ndim=2)
 U8_1D = ti.types.ndarray(dtype=ti.u8, ndim=1)  # bool masks, as uint8 views (Taichi takes no torch bool)
+# rows of 8 as vectors (the 8 x 8 CLT quadrants, kernels and low-pass tables, viewed row by row): one load or store
+# per row, and the row's 8 frequencies as vector lanes
+V8 = ti.types.vector(8, ti.f32)
+V8_1D = ti.types.ndarray(dtype=V8, ndim=1)
+V8_2D = ti.types.ndarray(dtype=V8, ndim=2)
