@@ -68,6 +68,10 @@ SEEN_STRENGTH = 0.3
 # +0.03-0.15 passes per frame. Unsupported answers read too: 800 #5 22 -> 37 tiles.
 SUPPORT_BAND = 1.0
 SUPPORT_MIN = 1
+# Step (2)'s pass measures every tile at its start; refinement takes that measurement as a tile's first pass
+# where the aggregation's choice lies within FIRST_BAND px of the start (most tiles), instead of correlating the
+# tile again at the choice.
+FIRST_BAND = 0.25
 
 
 @dataclass(frozen=True)
@@ -94,6 +98,18 @@ class DisparityResult:
     search: torch.Tensor
     margin: torch.Tensor
     tile_passes: float
+
+
+@dataclass
+class FirstMeasure:
+    """Step (2)'s measurement of every tile at its start, ``(tiles_y, tiles_x)`` each (buffers of the engine, made
+    once, valid until the next frame): ``target`` the start, ``residual`` and ``strength`` as the measurer gives
+    them (NaN / 0 where none), ``finite`` the tile's windows read finite pixels."""
+
+    target: torch.Tensor
+    residual: torch.Tensor
+    strength: torch.Tensor
+    finite: torch.Tensor
 
 
 def reference_scale(frames: torch.Tensor) -> torch.Tensor:
@@ -154,6 +170,9 @@ class DisparityEngine:
         # tiles are filled (a tile reading masked or NaN pixels stays NaN, as the processor masks it)
         self.read_finite = torch.zeros(self.grid, dtype=torch.bool, device=self.device)
         self.sparse_tiles[::SPARSE, ::SPARSE] = True
+        self.first = FirstMeasure(*(torch.zeros(self.grid, device=self.device) for _ in range(3)),
+                                  torch.zeros(self.grid, dtype=torch.bool, device=self.device))
+        self._every_tile = torch.ones(self.tp.tiles, dtype=torch.bool, device=self.device)
         self.all_tiles = torch.arange(self.tp.tiles, device=self.device)
         self.sparse_index = torch.nonzero(self.sparse_tiles.reshape(-1))[:, 0]  # (sparse tiles,) flat numbers
         self.sparse_grid = tuple((n + SPARSE - 1) // SPARSE for n in self.grid)
@@ -223,8 +242,9 @@ class DisparityEngine:
         sparse.values.copy_(volume.values[::SPARSE, ::SPARSE])
         coarse, _ = self._choose(sparse)
         start = coarse.repeat_interleave(SPARSE, 0).repeat_interleave(SPARSE, 1)[: self.grid[0], : self.grid[1]]
-        # (2) every tile at that answer, aggregated with what (1) saw
+        # (2) every tile at that answer, aggregated with what (1) saw; the pass's residuals kept (FIRST_BAND)
         self._sweep(self.tp, [start], volume)
+        self._keep_first(start)
         passes += 1.0
         read = [start]
         for other in self._other_starts(coarse):  # (see SUPPORT_MIN)
@@ -248,6 +268,15 @@ class DisparityEngine:
             passes += share
             found, margin = self._choose(volume)
         return found, margin, passes
+
+    def _keep_first(self, start: torch.Tensor) -> None:
+        """Measure the processor's last pass (every tile at ``start (ty, tx)``) into ``self.first``."""
+        first, result = self.first, self.tp.result
+        residual, strength = self.measurer.measure(result.corr, self._every_tile)
+        first.target.copy_(start)
+        first.residual.copy_(residual.view(self.grid))
+        first.strength.copy_(strength.view(self.grid))
+        first.finite.copy_(result.finite.view(self.grid))
 
     def _other_starts(self, coarse: torch.Tensor) -> list[torch.Tensor]:
         """Three ``(ty, tx)`` grids from the sparse grid's answers ``coarse``: for each tile, the answer of the
@@ -291,8 +320,11 @@ class DisparityEngine:
         return share
 
     # --- refinement ------------------------------------------------------------------------------------------
-    def refine(self, start: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, float]:
-        """Re-correlation from ``start`` on the tiles that still move: ``(disparity, strength, passes)``."""
+    def refine(self, start: torch.Tensor, first: FirstMeasure | None = None) -> tuple[torch.Tensor, torch.Tensor,
+                                                                                       float]:
+        """Re-correlation from ``start`` on the tiles that still move: ``(disparity, strength, passes)``. With
+        ``first``, a tile whose start lies within ``FIRST_BAND`` px of ``first.target`` takes that measurement as
+        its first pass (measured there, not again at ``start``)."""
         cfg = self.config
         t = start.clone()
         active = torch.isfinite(t)
@@ -302,15 +334,21 @@ class DisparityEngine:
         prev_d = torch.full_like(t, float("nan"))
         passes = 0.0
         tiles = t.numel()
-        for _ in range(cfg.refine_passes):
+        for step in range(cfg.refine_passes):
             if not bool(active.any()):
                 break
-            measured = self.measure_at(self.tp, torch.nan_to_num(t, nan=0.0), active=active)
-            corr = measured.corr
-            self.read_finite.logical_and_(~active).logical_or_(active & measured.finite.view(t.shape))
-            passes += float(active.sum()) / tiles
-            d, s = self.measurer.measure(corr, active.reshape(-1))
+            kept = active & ((t - first.target).abs() <= FIRST_BAND) if step == 0 and first is not None else None
+            measure = active if kept is None else active & ~kept
+            measured = self.measure_at(self.tp, torch.nan_to_num(t, nan=0.0), active=measure)
+            finite = measured.finite.view(t.shape)
+            passes += float(measure.sum()) / tiles
+            d, s = self.measurer.measure(measured.corr, measure.reshape(-1))
             d, s = d.reshape(t.shape), s.reshape(t.shape)
+            if kept is not None:
+                t = torch.where(kept, first.target, t)
+                d, s = torch.where(kept, first.residual, d), torch.where(kept, first.strength, s)
+                finite = torch.where(kept, first.finite, finite)
+            self.read_finite.logical_and_(~active).logical_or_(active & finite)
             good = active & torch.isfinite(d) & (s >= cfg.min_strength) & (d.abs() <= cfg.trust)
             disparity = torch.where(good, t + d, disparity)
             strength = torch.where(good, s, strength)
@@ -341,7 +379,7 @@ class DisparityEngine:
         self.tp.load(frames_t)
         self.read_finite.fill_(False)
         found, margin, passes = self.search()
-        disparity, strength, refine_passes = self.refine(found)
+        disparity, strength, refine_passes = self.refine(found, self.first)
         passes += refine_passes
         disparity = self.leash(disparity, found, margin)
         disparity, strength, more = self.consistency(disparity, strength)
