@@ -66,6 +66,7 @@ import torch.nn.functional as F
 import warp as wp
 
 from tpnet_gpu import tables
+from tpnet_gpu.net import frame as net_frame
 from tpnet_gpu.net import model as net_model
 from tpnet_gpu.processor import BACKENDS, TileProcessor
 from tpnet_gpu.warp_setup import default_device, init_warp
@@ -96,9 +97,9 @@ def network_stage1(net: net_model.TPNet, layers: torch.Tensor, target: torch.Ten
 
 
 def network_stage2(net: net_model.TPNet, features: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """Residuals ``(ty, tx)`` from stage-1 features: the second half of ``model.frame_residual`` (clone 0, all tiles
+    """Residuals ``(ty, tx)`` from stage-1 features: the second half of ``frame.frame_residual`` (clone 0, all tiles
     active), by the model's own ``frame_stage2``."""
-    return net_model.frame_stage2(features, target, _params(net)[1], (0,))[..., 0]
+    return net_frame.frame_stage2(features, target, _params(net)[1], (0,))[..., 0]
 
 
 # --- the three implementations ----------------------------------------------------------------------------------

@@ -16,7 +16,8 @@ from pathlib import Path
 import torch
 from torch import Tensor, nn
 
-from tpnet_gpu.net.model import CORR_SIZE, TPNet, frame_residual
+from tpnet_gpu.net.frame import frame_residual
+from tpnet_gpu.net.model import CORR_SIZE, TPNet
 
 OPSET = 18  # the opset the exporter was checked with (onnxruntime 1.2x runs it)
 INPUTS = ("layers", "target")

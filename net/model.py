@@ -6,9 +6,9 @@ relative to the centre's (800 + 25 values) into the **residual** disparity of th
 disparity = target + residual). Two equivalent forms use the same parameters:
 
 * cluster form (training batches): ``(B, 25, 325) -> (B, 3)``, one output per stage-2 clone (§4);
-* whole-frame form (inference, dense training): stage 1 as a matmul over all tiles (a 1x1 convolution),
-  stage 2's first layer as a 5x5 convolution over replicate-padded stage-1 features plus a matmul over each
-  tile's 25 relative targets, the rest per tile.
+* whole-frame form (inference, dense training; net/frame.py): stage 1 as a matmul over all tiles (a 1x1
+  convolution), stage 2's first layer as a 5x5 convolution over replicate-padded stage-1 features plus a matmul
+  over each tile's 25 relative targets, the rest per tile.
 
 Convention:
     * Correlation layers are ordered ``[hor, vert, diag-main, diag-other]``; each is 9x9 (row = vertical
@@ -35,8 +35,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from tpnet_gpu.net.checks import check_like, check_tensor, clone_list, frame_grid
-from tpnet_gpu.net.neighbours import CLUSTER_RADIUS, frame_relative_targets, relative_targets
+from tpnet_gpu.net.checks import check_like, check_tensor, clone_list
+from tpnet_gpu.net.neighbours import CLUSTER_RADIUS, relative_targets
 
 CORR_LAYERS = 4  # the quad's layers: hor, vert, diag-main, diag-other (other rigs: one per direction group)
 CORR_SIZE = 9  # 9x9 crop per layer
@@ -208,81 +208,6 @@ def _version(t: Tensor) -> int:
     return -1 if t.is_inference() else t._version
 
 
-def stage2_conv(first: Layer, clones: Sequence[int]) -> tuple[Tensor, Tensor, Tensor]:
-    """Stage 2's first layer, one masked copy per clone, as 5x5 convolution kernels :math:`(n \\cdot hidden, F, 5, 5)`
-    (``kernel[o, c, dy+2, dx+2] = W[o, k*F + c]``), relative-target weights :math:`(n \\cdot hidden, 25)`
-    (``W[o, 25*F + k]``) and biases :math:`(n \\cdot hidden)`."""
-    weight, bias = first
-    hidden = weight.shape[0]
-    n_features = weight.shape[1] // CLUSTER_TILES - 1
-    kernel = weight[:, :CLUSTER_TILES * n_features].reshape(hidden, CLUSTER_TILES, n_features).transpose(1, 2)
-    kernel = kernel.reshape(hidden, n_features, CLUSTER_SIDE, CLUSTER_SIDE)
-    masks = clone_masks(weight.device, weight.dtype)[list(clones)]  # (n, 5, 5)
-    relative = weight[:, CLUSTER_TILES * n_features:].unsqueeze(0) * masks.flatten(1)[:, None]  # (n, hidden, 25)
-    return ((kernel.unsqueeze(0) * masks[:, None, None]).flatten(0, 1), relative.flatten(0, 1),
-            bias.repeat(len(clones)))
-
-
-def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stage2: Sequence[Layer], *,
-                   grid: tuple[int, int] | None = None, active: Tensor | None = None, clone=0,
-                   conv: tuple[Tensor, Tensor, Tensor] | None = None) -> Tensor:
-    """Whole-frame form: residual disparity of every tile, by convolutions with the cluster form's weights.
-
-    Args:
-        layers: :math:`(ty, tx, G, 9, 9)`, or :math:`(ty \\cdot tx, G, 9, 9)` (row-major tiles) with ``grid``;
-            G = the layers the weights read (the quad's 4).
-        target: :math:`(ty, tx)` (or :math:`(ty \\cdot tx)` with ``grid``) target disparities; NaN -> 0.
-        stage1, stage2: ``(weight, bias)`` pairs (see :class:`TPNet`).
-        grid: ``(ty, tx)``, required for tile-major ``layers``.
-        active: optional :math:`(ty, tx)` bool; inactive tiles get zero stage-1 features.
-        clone: 0, 1 or 2 (5x5, 3x3, centre-only stage 2), or a sequence of them (stage 1 runs once).
-        conv: ``stage2_conv(stage2[0], clones)`` when the caller keeps it (else made here).
-
-    Returns:
-        :math:`(ty, tx)` residuals for an int ``clone``; :math:`(ty, tx, n)` for a sequence of ``n`` clones
-        (clone axis last, as in the cluster form). On the inputs' device.
-
-    Raises:
-        TypeError / ValueError: bad shapes, dtypes (inputs must have the parameters' dtype, ``active`` bool),
-        devices that differ, or a bad ``clone``.
-    """
-    g = _check_layers(stage1, stage2)
-    clones, single = clone_list(clone, len(CLONE_RADII))
-    tile_shape = (g, CORR_SIZE, CORR_SIZE)
-    ty, tx = frame_grid(layers, target, active, grid, tile_shape, stage1[0][0])
-
-    x = tile_inputs(layers.reshape(ty, tx, *tile_shape), target.reshape(ty, tx))  # (ty, tx, G*81 + 1)
-    features = stage1_features(x, stage1)  # (ty, tx, F): stage 1 as a matmul over all tiles (1x1 conv)
-    if active is not None:
-        features = torch.where(active.unsqueeze(-1), features, torch.zeros_like(features))
-    residual = frame_stage2(features, target.reshape(ty, tx), stage2, clones, active=active, conv=conv)
-    return residual[..., 0] if single else residual
-
-
-def frame_stage2(features: Tensor, target: Tensor, stage2: Sequence[Layer], clones: Sequence[int], *,
-                 active: Tensor | None = None, conv: tuple[Tensor, Tensor, Tensor] | None = None) -> Tensor:
-    """Stage 2 of the whole-frame form: 5x5 convolution over replicate-padded stage-1 features plus the relative
-    targets' term, then the per-tile rest. Arguments as :func:`frame_residual` (checked there).
-
-    Args:
-        features: :math:`(ty, tx, F)` stage-1 features (zero on inactive tiles).
-        target: :math:`(ty, tx)` target disparities (px).
-
-    Returns:
-        :math:`(ty, tx, n)` residuals of the ``n`` clones.
-    """
-    ty, tx = target.shape
-    padded = F.pad(features.permute(2, 0, 1).unsqueeze(0), (CLUSTER_RADIUS,) * 4, mode="replicate")
-    hidden = stage2[0][0].shape[0]
-    kernels, relative_weight, biases = conv if conv is not None else stage2_conv(stage2[0], clones)
-    z = F.conv2d(padded, kernels, biases)  # (1, n*hidden, ty, tx)
-    relative = frame_relative_targets(target, active)  # (ty*tx, 25)
-    z.view(len(clones) * hidden, ty * tx).addmm_(relative_weight, relative.T)  # in place: no product tensor
-    z = z.view(len(clones), hidden, ty, tx).permute(2, 3, 0, 1)  # (ty, tx, n, hidden)
-    z = F.leaky_relu(z, NEGATIVE_SLOPE, inplace=True) if len(stage2) > 1 else z  # in place: 80 MB less at 5 MPix
-    return stage2_output(z, stage2[1:]) if len(stage2) > 1 else z.squeeze(-1)  # (ty, tx, n)
-
-
 # ----------------------------------------------------------------------------------------------- module
 class TPNet(nn.Module):
     """TPNET with both forms (cluster and whole-frame) on one set of parameters.
@@ -363,7 +288,9 @@ class TPNet(nn.Module):
     def forward_frame(self, layers: Tensor, target: Tensor, *, grid: tuple[int, int] | None = None,
                       active: Tensor | None = None, clone=0) -> Tensor:
         """Residuals :math:`(ty, tx)` (or :math:`(ty, tx, n)` for a sequence of clones) of a whole frame
-        (see :func:`frame_residual`)."""
+        (see ``net.frame.frame_residual``)."""
+        from tpnet_gpu.net.frame import frame_residual, stage2_conv  # noqa: PLC0415 - frame.py builds on this module
+
         stage1, stage2 = self._params()
         conv = None
         if not torch.is_grad_enabled():  # inference: stage 2's kernels are made once per set of weights

@@ -2,6 +2,7 @@
 aggregation (``volume``), per-tile measurement (``measure``), the coarse-to-fine search and sparse refinement
 (``engine``)."""
 
-from tpnet_gpu.disparity.engine import DisparityEngine, DisparityResult
+from tpnet_gpu.disparity.engine import DisparityEngine
+from tpnet_gpu.disparity.results import DisparityResult
 
 __all__ = ["DisparityEngine", "DisparityResult"]

@@ -16,8 +16,6 @@ quarter of the tiles counts 1/4).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import torch
 
@@ -27,6 +25,7 @@ from tpnet_gpu.disparity.grid import fill, neighbourhood, ring_median, settle, t
 from tpnet_gpu.disparity.measure import CHUNK, Measurer, row_chunks
 from tpnet_gpu.disparity.occlusion import Occlusion, lowest
 from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs, default_pairs
+from tpnet_gpu.disparity.results import DisparityResult, FirstMeasure
 from tpnet_gpu.disparity.volume import CostVolume
 from tpnet_gpu.processor import TileProcessor, validate
 
@@ -72,44 +71,6 @@ SUPPORT_MIN = 1
 # where the aggregation's choice lies within FIRST_BAND px of the start (most tiles), instead of correlating the
 # tile again at the choice.
 FIRST_BAND = 0.25
-
-
-@dataclass(frozen=True)
-class DisparityResult:
-    """One frame's disparities, torch on the engine's device, ``(tiles_y, tiles_x)`` each.
-
-    Attributes:
-        disparity: px. Where refinement trusted no measurement: the first stage's answer if it was clear
-            (margin >= ``verify_margin``), the tile's windows held finite pixels and it agrees with the measured
-            neighbours (``grid.fill``; strength 0 there), else NaN.
-        strength: the final measurement's correlation strength (0 where none: such tiles have confidence 0).
-        confidence: ``strength``, scaled by ``TWO_DEPTH_WEIGHT`` on ``two_depth`` tiles (higher = surer).
-        two_depth: bool, the tile's window straddles two depths (its neighbours' disparities span more than
-            ``grid.TWO_DEPTH_SPREAD``): its disparity is one of them or a blend, do not trust it as a surface.
-        search: the first stage's answer (before refinement), px.
-        margin: the first stage's aggregated-cost margin to the best choice > 1 px away (larger = surer).
-        tile_passes: tiles x cameras processed, in full-resolution passes.
-    """
-
-    disparity: torch.Tensor
-    strength: torch.Tensor
-    confidence: torch.Tensor
-    two_depth: torch.Tensor
-    search: torch.Tensor
-    margin: torch.Tensor
-    tile_passes: float
-
-
-@dataclass
-class FirstMeasure:
-    """Step (2)'s measurement of every tile at its start, ``(tiles_y, tiles_x)`` each (buffers of the engine, made
-    once, valid until the next frame): ``target`` the start, ``residual`` and ``strength`` as the measurer gives
-    them (NaN / 0 where none), ``finite`` the tile's windows read finite pixels."""
-
-    target: torch.Tensor
-    residual: torch.Tensor
-    strength: torch.Tensor
-    finite: torch.Tensor
 
 
 def reference_scale(frames: torch.Tensor) -> torch.Tensor:

@@ -1,0 +1,130 @@
+"""TPNET's whole-frame form (network.md §3): stage 1 as a matmul over every tile of a frame (a 1x1 convolution),
+stage 2's first layer as a 5x5 convolution over replicate-padded stage-1 features plus a matmul over each tile's
+25 relative targets, the rest per tile - the same parameters and outputs as the cluster form of net/model.py,
+whose per-tile pieces (inputs, stage 1, stage 2's rest, clone masks) it uses. Conventions: net/model.py.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from tpnet_gpu.net.checks import clone_list, frame_grid
+from tpnet_gpu.net.model import (
+    CLONE_RADII, CLUSTER_SIDE, CLUSTER_TILES, CORR_SIZE, NEGATIVE_SLOPE, Layer, _check_layers, clone_masks,
+    stage1_features, stage2_output, tile_inputs,
+)
+from tpnet_gpu.net.neighbours import CLUSTER_RADIUS, frame_relative_targets
+
+# Tiles per step of the whole-frame stage 1 (``frame_stage1``) and of stage 2 after its convolution: bounds their
+# temporaries - at 5 MPix stage 1's inputs and first layer for all 78408 tiles at once are ~180 MB, stage 2's
+# copy of its permuted hidden layer 80 MB: most of a frame's peak memory above the buffers.
+STAGE1_TILES = 16384
+
+
+def stage2_conv(first: Layer, clones: Sequence[int]) -> tuple[Tensor, Tensor, Tensor]:
+    """Stage 2's first layer, one masked copy per clone, as 5x5 convolution kernels :math:`(n \\cdot hidden, F, 5, 5)`
+    (``kernel[o, c, dy+2, dx+2] = W[o, k*F + c]``), relative-target weights :math:`(n \\cdot hidden, 25)`
+    (``W[o, 25*F + k]``) and biases :math:`(n \\cdot hidden)`."""
+    weight, bias = first
+    hidden = weight.shape[0]
+    n_features = weight.shape[1] // CLUSTER_TILES - 1
+    kernel = weight[:, :CLUSTER_TILES * n_features].reshape(hidden, CLUSTER_TILES, n_features).transpose(1, 2)
+    kernel = kernel.reshape(hidden, n_features, CLUSTER_SIDE, CLUSTER_SIDE)
+    masks = clone_masks(weight.device, weight.dtype)[list(clones)]  # (n, 5, 5)
+    relative = weight[:, CLUSTER_TILES * n_features:].unsqueeze(0) * masks.flatten(1)[:, None]  # (n, hidden, 25)
+    return ((kernel.unsqueeze(0) * masks[:, None, None]).flatten(0, 1), relative.flatten(0, 1),
+            bias.repeat(len(clones)))
+
+
+def frame_stage1(layers: Tensor, target: Tensor, stage1: Sequence[Layer]) -> Tensor:
+    """Stage 1 of every tile of a frame, ``STAGE1_TILES`` tiles at a time (the same rows as all at once).
+
+    Args:
+        layers: :math:`(ty, tx, G, 9, 9)` correlation layers; target: :math:`(ty, tx)` target disparities.
+
+    Returns:
+        :math:`(ty, tx, F)` features.
+    """
+    ty, tx = target.shape
+    if ty * tx <= STAGE1_TILES:
+        return stage1_features(tile_inputs(layers, target), stage1)
+    layers, target = layers.reshape(ty * tx, *layers.shape[2:]), target.reshape(-1)
+    features = None
+    for start in range(0, ty * tx, STAGE1_TILES):
+        rows = slice(start, start + STAGE1_TILES)
+        part = stage1_features(tile_inputs(layers[rows], target[rows]), stage1)
+        if features is None:
+            features = part.new_empty((ty * tx, part.shape[-1]))
+        features[rows] = part
+    return features.view(ty, tx, -1)
+
+
+def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stage2: Sequence[Layer], *,
+                   grid: tuple[int, int] | None = None, active: Tensor | None = None, clone=0,
+                   conv: tuple[Tensor, Tensor, Tensor] | None = None) -> Tensor:
+    """Whole-frame form: residual disparity of every tile, by convolutions with the cluster form's weights.
+
+    Args:
+        layers: :math:`(ty, tx, G, 9, 9)`, or :math:`(ty \\cdot tx, G, 9, 9)` (row-major tiles) with ``grid``;
+            G = the layers the weights read (the quad's 4).
+        target: :math:`(ty, tx)` (or :math:`(ty \\cdot tx)` with ``grid``) target disparities; NaN -> 0.
+        stage1, stage2: ``(weight, bias)`` pairs (see :class:`TPNet`).
+        grid: ``(ty, tx)``, required for tile-major ``layers``.
+        active: optional :math:`(ty, tx)` bool; inactive tiles get zero stage-1 features.
+        clone: 0, 1 or 2 (5x5, 3x3, centre-only stage 2), or a sequence of them (stage 1 runs once).
+        conv: ``stage2_conv(stage2[0], clones)`` when the caller keeps it (else made here).
+
+    Returns:
+        :math:`(ty, tx)` residuals for an int ``clone``; :math:`(ty, tx, n)` for a sequence of ``n`` clones
+        (clone axis last, as in the cluster form). On the inputs' device.
+
+    Raises:
+        TypeError / ValueError: bad shapes, dtypes (inputs must have the parameters' dtype, ``active`` bool),
+        devices that differ, or a bad ``clone``.
+    """
+    g = _check_layers(stage1, stage2)
+    clones, single = clone_list(clone, len(CLONE_RADII))
+    tile_shape = (g, CORR_SIZE, CORR_SIZE)
+    ty, tx = frame_grid(layers, target, active, grid, tile_shape, stage1[0][0])
+
+    features = frame_stage1(layers.reshape(ty, tx, *tile_shape), target.reshape(ty, tx), stage1)  # (ty, tx, F)
+    if active is not None:
+        features = torch.where(active.unsqueeze(-1), features, torch.zeros_like(features))
+    residual = frame_stage2(features, target.reshape(ty, tx), stage2, clones, active=active, conv=conv)
+    return residual[..., 0] if single else residual
+
+
+def frame_stage2(features: Tensor, target: Tensor, stage2: Sequence[Layer], clones: Sequence[int], *,
+                 active: Tensor | None = None, conv: tuple[Tensor, Tensor, Tensor] | None = None) -> Tensor:
+    """Stage 2 of the whole-frame form: 5x5 convolution over replicate-padded stage-1 features plus the relative
+    targets' term, then the per-tile rest. Arguments as :func:`frame_residual` (checked there).
+
+    Args:
+        features: :math:`(ty, tx, F)` stage-1 features (zero on inactive tiles).
+        target: :math:`(ty, tx)` target disparities (px).
+
+    Returns:
+        :math:`(ty, tx, n)` residuals of the ``n`` clones.
+    """
+    ty, tx = target.shape
+    padded = F.pad(features.permute(2, 0, 1).unsqueeze(0), (CLUSTER_RADIUS,) * 4, mode="replicate")
+    hidden = stage2[0][0].shape[0]
+    kernels, relative_weight, biases = conv if conv is not None else stage2_conv(stage2[0], clones)
+    z = F.conv2d(padded, kernels, biases)  # (1, n*hidden, ty, tx)
+    relative = frame_relative_targets(target, active)  # (ty*tx, 25)
+    z.view(len(clones) * hidden, ty * tx).addmm_(relative_weight, relative.T)  # in place: no product tensor
+    z = z.view(len(clones), hidden, ty, tx).permute(2, 3, 0, 1)  # (ty, tx, n, hidden)
+    if len(stage2) == 1:
+        return z.squeeze(-1)  # (ty, tx, n)
+    z = F.leaky_relu(z, NEGATIVE_SLOPE, inplace=True)  # in place: 80 MB less at 5 MPix
+    rows = max(1, STAGE1_TILES // tx)  # grid rows per step: the rest reads z row by row (a copy of each step)
+    if rows >= ty:
+        return stage2_output(z, stage2[1:])
+    out = z.new_empty((ty, tx, len(clones)))
+    for start in range(0, ty, rows):
+        out[start:start + rows] = stage2_output(z[start:start + rows], stage2[1:])
+    return out
