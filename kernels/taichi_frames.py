@@ -37,8 +37,14 @@ def pad_frames(frames: F32_3D, padded: F32_3D):
     """padded[cam, y, x] = frames[cam, clamp(y - PAD), clamp(x - PAD)]; padded is (cams, H + 2 PAD, W + 2 PAD)."""
     height = frames.shape[1]
     width = frames.shape[2]
-    for cam, y, x in padded:
-        padded[cam, y, x] = frames[cam, pair_clamp(y - PAD, height), pair_clamp(x - PAD, width)]
+    for cam, y in ti.ndrange(padded.shape[0], padded.shape[1]):  # a thread per row: no index division per pixel
+        source = pair_clamp(y - PAD, height)
+        for x in range(PAD):
+            padded[cam, y, x] = frames[cam, source, pair_clamp(x - PAD, width)]
+        for x in range(width):  # the row itself, a plain copy
+            padded[cam, y, PAD + x] = frames[cam, source, x]
+        for x in range(PAD + width, padded.shape[2]):
+            padded[cam, y, x] = frames[cam, source, pair_clamp(x - PAD, width)]
 
 
 @ti.kernel

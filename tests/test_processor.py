@@ -46,6 +46,22 @@ def test_float32_torch_input_is_read_in_place(device, backend, frames):
     torch.testing.assert_close(staging.cpu(), torch.from_numpy(frames.astype(np.uint16).astype(np.float32)))
 
 
+def test_load_pads_with_the_pair_clamp(device, backend, frames):
+    """Oracle: the pair clamp of tile_processor.md §1.4 written out in NumPy (an index below 0 takes its parity's
+    first row or column, one past the end its parity's last), applied to the frames: the padded buffer equals
+    it exactly, borders and interior."""
+    from tpnet_gpu.kernels.frames import PAD  # noqa: PLC0415
+
+    def clamp(q, n):
+        return np.where(q < 0, q & 1, np.where(q >= n, n - 2 + (q & 1), q))
+
+    tp = TileProcessor(H, W, device=device, backend=backend)
+    tp.load(frames)
+    rows, cols = clamp(np.arange(H + 2 * PAD) - PAD, H), clamp(np.arange(W + 2 * PAD) - PAD, W)
+    padded = tp._buffers.torch(tp._buffers.padded).cpu().numpy()
+    np.testing.assert_array_equal(padded, frames[:, rows][:, :, cols])
+
+
 def test_one_load_serves_many_targets(device, backend, keep_clt, frames):
     # Oracle: process() of the same frames at each target (load once, measure many = the pipeline's passes).
     tp = TileProcessor(H, W, clt=keep_clt, device=device, backend=backend)
