@@ -48,7 +48,7 @@ class FrameNetwork(nn.Module):
 
     def forward(self, layers: Tensor, target: Tensor) -> Tensor:
         stage1, stage2 = self.model._params()
-        return target + frame_residual(layers, target, stage1, stage2, clone=0)
+        return target + frame_residual(layers, target, stage1, stage2, clone=0, steps=False)  # symbolic tile counts
 
 
 def _onnx_modules():

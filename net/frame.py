@@ -19,9 +19,9 @@ from tpnet_gpu.net.model import (
 )
 from tpnet_gpu.net.neighbours import CLUSTER_RADIUS, frame_relative_targets
 
-# Tiles per step of the whole-frame stage 1 (``frame_stage1``) and of stage 2 after its convolution: bounds their
-# temporaries - at 5 MPix stage 1's inputs and first layer for all 78408 tiles at once are ~180 MB, stage 2's
-# copy of its permuted hidden layer 80 MB: most of a frame's peak memory above the buffers.
+# Tiles per step of the whole-frame stage 1 (``frame_stage1``) and stage 2 (``frame_stage2``, whole grid rows):
+# bounds their temporaries - at 5 MPix stage 1's inputs and first layer for all 78408 tiles at once are ~180 MB,
+# stage 2's hidden layer 80 MB and a copy of it: most of a frame's peak memory above the buffers.
 STAGE1_TILES = 16384
 
 
@@ -40,8 +40,9 @@ def stage2_conv(first: Layer, clones: Sequence[int]) -> tuple[Tensor, Tensor, Te
             bias.repeat(len(clones)))
 
 
-def frame_stage1(layers: Tensor, target: Tensor, stage1: Sequence[Layer]) -> Tensor:
-    """Stage 1 of every tile of a frame, ``STAGE1_TILES`` tiles at a time (the same rows as all at once).
+def frame_stage1(layers: Tensor, target: Tensor, stage1: Sequence[Layer], *, steps: bool = True) -> Tensor:
+    """Stage 1 of every tile of a frame, ``STAGE1_TILES`` tiles at a time (the same rows as all at once), or all at
+    once without ``steps``.
 
     Args:
         layers: :math:`(ty, tx, G, 9, 9)` correlation layers; target: :math:`(ty, tx)` target disparities.
@@ -50,7 +51,7 @@ def frame_stage1(layers: Tensor, target: Tensor, stage1: Sequence[Layer]) -> Ten
         :math:`(ty, tx, F)` features.
     """
     ty, tx = target.shape
-    if ty * tx <= STAGE1_TILES:
+    if not steps or ty * tx <= STAGE1_TILES:
         return stage1_features(tile_inputs(layers, target), stage1)
     layers, target = layers.reshape(ty * tx, *layers.shape[2:]), target.reshape(-1)
     features = None
@@ -65,7 +66,7 @@ def frame_stage1(layers: Tensor, target: Tensor, stage1: Sequence[Layer]) -> Ten
 
 def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stage2: Sequence[Layer], *,
                    grid: tuple[int, int] | None = None, active: Tensor | None = None, clone=0,
-                   conv: tuple[Tensor, Tensor, Tensor] | None = None) -> Tensor:
+                   conv: tuple[Tensor, Tensor, Tensor] | None = None, steps: bool = True) -> Tensor:
     """Whole-frame form: residual disparity of every tile, by convolutions with the cluster form's weights.
 
     Args:
@@ -77,6 +78,8 @@ def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stag
         active: optional :math:`(ty, tx)` bool; inactive tiles get zero stage-1 features.
         clone: 0, 1 or 2 (5x5, 3x3, centre-only stage 2), or a sequence of them (stage 1 runs once).
         conv: ``stage2_conv(stage2[0], clones)`` when the caller keeps it (else made here).
+        steps: stage 1 and stage 2 in steps of ``STAGE1_TILES`` tiles (the same values, less memory); False: the
+            whole frame at once (what ``torch.export`` can trace with the tile counts symbolic, net/export.py).
 
     Returns:
         :math:`(ty, tx)` residuals for an int ``clone``; :math:`(ty, tx, n)` for a sequence of ``n`` clones
@@ -91,15 +94,17 @@ def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stag
     tile_shape = (g, CORR_SIZE, CORR_SIZE)
     ty, tx = frame_grid(layers, target, active, grid, tile_shape, stage1[0][0])
 
-    features = frame_stage1(layers.reshape(ty, tx, *tile_shape), target.reshape(ty, tx), stage1)  # (ty, tx, F)
+    features = frame_stage1(layers.reshape(ty, tx, *tile_shape), target.reshape(ty, tx), stage1,
+                            steps=steps)  # (ty, tx, F)
     if active is not None:
         features = torch.where(active.unsqueeze(-1), features, torch.zeros_like(features))
-    residual = frame_stage2(features, target.reshape(ty, tx), stage2, clones, active=active, conv=conv)
+    residual = frame_stage2(features, target.reshape(ty, tx), stage2, clones, active=active, conv=conv, steps=steps)
     return residual[..., 0] if single else residual
 
 
 def frame_stage2(features: Tensor, target: Tensor, stage2: Sequence[Layer], clones: Sequence[int], *,
-                 active: Tensor | None = None, conv: tuple[Tensor, Tensor, Tensor] | None = None) -> Tensor:
+                 active: Tensor | None = None, conv: tuple[Tensor, Tensor, Tensor] | None = None,
+                 steps: bool = True) -> Tensor:
     """Stage 2 of the whole-frame form: 5x5 convolution over replicate-padded stage-1 features plus the relative
     targets' term, then the per-tile rest. Arguments as :func:`frame_residual` (checked there).
 
@@ -112,19 +117,23 @@ def frame_stage2(features: Tensor, target: Tensor, stage2: Sequence[Layer], clon
     """
     ty, tx = target.shape
     padded = F.pad(features.permute(2, 0, 1).unsqueeze(0), (CLUSTER_RADIUS,) * 4, mode="replicate")
-    hidden = stage2[0][0].shape[0]
+    hidden, n = stage2[0][0].shape[0], len(clones)
     kernels, relative_weight, biases = conv if conv is not None else stage2_conv(stage2[0], clones)
-    z = F.conv2d(padded, kernels, biases)  # (1, n*hidden, ty, tx)
     relative = frame_relative_targets(target, active)  # (ty*tx, 25)
-    z.view(len(clones) * hidden, ty * tx).addmm_(relative_weight, relative.T)  # in place: no product tensor
-    z = z.view(len(clones), hidden, ty, tx).permute(2, 3, 0, 1)  # (ty, tx, n, hidden)
-    if len(stage2) == 1:
-        return z.squeeze(-1)  # (ty, tx, n)
-    z = F.leaky_relu(z, NEGATIVE_SLOPE, inplace=True)  # in place: 80 MB less at 5 MPix
-    rows = max(1, STAGE1_TILES // tx)  # grid rows per step: the rest reads z row by row (a copy of each step)
-    if rows >= ty:
-        return stage2_output(z, stage2[1:])
-    out = z.new_empty((ty, tx, len(clones)))
+
+    def grid_rows(start, stop) -> Tensor:
+        """``(stop - start, tx, n)``: the residuals of grid rows start..stop-1 (the convolution reads 2 more rows
+        on each side of them)."""
+        z = F.conv2d(padded[:, :, start:stop + 2 * CLUSTER_RADIUS], kernels, biases)  # (1, n*hidden, rows, tx)
+        z.view(n * hidden, -1).addmm_(relative_weight, relative[start * tx:stop * tx].T)  # in place
+        z = z.view(n, hidden, stop - start, tx).permute(2, 3, 0, 1)  # (rows, tx, n, hidden)
+        return z.squeeze(-1) if len(stage2) == 1 else stage2_output(F.leaky_relu(z, NEGATIVE_SLOPE, inplace=True),
+                                                                    stage2[1:])
+
+    rows = max(1, STAGE1_TILES // tx)  # grid rows per step
+    if not steps or rows >= ty:  # no python loop over the rows: torch.export keeps ty symbolic
+        return grid_rows(0, ty)
+    out = features.new_empty((ty, tx, n))
     for start in range(0, ty, rows):
-        out[start:start + rows] = stage2_output(z[start:start + rows], stage2[1:])
+        out[start:start + rows] = grid_rows(start, min(ty, start + rows))
     return out

@@ -114,11 +114,17 @@ def test_two_depth_tiles_are_the_rendered_depth_edges():
     assert torch.allclose(result.confidence[result.two_depth], 0.25 * result.strength[result.two_depth])
 
 
-def test_frame_scale_does_not_depend_on_torch_threads():
+@pytest.mark.parametrize("scale_rows", [None, 100])
+def test_frame_scale_does_not_depend_on_torch_threads(scale_rows, monkeypatch):
     """The frames' scale (their mean |value| to REFERENCE_LEVEL) is the same with 1 and 2 torch threads, and the
     float64 mean's: a float32 mean depends on the reduction's split, and its 1-ulp changes of the scale changed
-    layer values of a data set built with other threads. Checked to fail with a float32 mean on these frames."""
+    layer values of a data set built with other threads. Checked to fail with a float32 mean on these frames.
+    Also with the rows read in steps of 100 (``SCALE_ROWS``; 1920 rows: 20 steps, the last one short)."""
+    from tpnet_gpu.disparity import engine as engine_module  # noqa: PLC0415
     from tpnet_gpu.disparity.engine import REFERENCE_LEVEL  # noqa: PLC0415
+
+    if scale_rows is not None:
+        monkeypatch.setattr(engine_module, "SCALE_ROWS", scale_rows)
 
     height, width = 480, 640
     frames = np.random.default_rng(0).uniform(0, 4000, (4, height, width)).astype(np.float32)  # float32 means differ

@@ -36,6 +36,7 @@ SPARSE = 2
 # Frames are scaled to this mean level before correlating, so the fat zero and the strength thresholds (set for
 # 12-bit raw data: rendered scenes have means of 1200-1800) are relative to the signal, for any bit depth.
 REFERENCE_LEVEL = 1500.0
+SCALE_ROWS = 2048  # frame rows per step of reference_scale (21 MB of temporaries at 2592 px a row)
 OFFSETS_STEP = 0.5  # px between the lags read along a pair's axis
 # Confidence of a tile flagged two-depth (grid.two_depth) is its strength scaled by TWO_DEPTH_WEIGHT, which ranks
 # them below nearly every single-depth tile: on 24 rendered tuning scenes, gross among the most confident 90 % /
@@ -78,9 +79,11 @@ def reference_scale(frames: torch.Tensor) -> torch.Tensor:
     (1 for all-zero frames)."""
     # per-row float32 sums, then their float64 total: a whole-frame float32 mean depends on the torch thread
     # count (1 ulp of the scale flipped layer values of a data set built with other threads), and a float64
-    # mean costs a frame-sized float64 copy
-    magnitude = torch.nan_to_num(frames, nan=0.0, posinf=0.0, neginf=0.0).abs_()
-    level = (magnitude.sum(dim=-1).double().sum() / magnitude.numel()).float()
+    # mean costs a frame-sized float64 copy; SCALE_ROWS rows at a time (no frame-sized |frames| copy either)
+    rows = frames.reshape(-1, frames.shape[-1])
+    sums = torch.cat([torch.nan_to_num(part, nan=0.0, posinf=0.0, neginf=0.0).abs_().sum(dim=-1)
+                      for part in rows.split(SCALE_ROWS)])
+    level = (sums.double().sum() / frames.numel()).float()
     return torch.where(level > 0, REFERENCE_LEVEL / level, torch.ones_like(level))
 
 
