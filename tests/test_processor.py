@@ -46,6 +46,30 @@ def test_float32_torch_input_is_read_in_place(device, backend, frames):
     torch.testing.assert_close(staging.cpu(), torch.from_numpy(frames.astype(np.uint16).astype(np.float32)))
 
 
+def test_measure_without_layers(device, backend, keep_clt, frames):
+    """``measure(layers=False)`` makes the same correlations and no layers (``result.layers`` None); a later
+    pass with layers makes them as a fresh processor does, masked passes included (tiles an earlier pass left
+    layers in and the new one skips are zero). Oracle: a second processor measuring with layers."""
+    tp = TileProcessor(H, W, clt=keep_clt, device=device, backend=backend)
+    fresh = TileProcessor(H, W, clt=keep_clt, device=device, backend=backend)
+    tp.load(frames)
+    fresh.load(frames)
+    half = np.zeros((H // 8, W // 8), dtype=bool)
+    half[:, : W // 16] = True
+    tp.measure(1.0)  # layers everywhere, then passes over parts of the frame
+    buffer = tp._buffers.result.layers  # the layers' buffer itself: untouched by a pass without them
+    for target, active, layers in ((0.5, half, False), (-1.0, ~half, True), (2.0, None, False), (0.0, half, True)):
+        before = buffer.clone()
+        got = tp.measure(target, active=active, layers=layers)
+        want = fresh.measure(target, active=active)
+        torch.testing.assert_close(got.corr, want.corr, rtol=0, atol=0)
+        if layers:
+            torch.testing.assert_close(got.layers, want.layers, rtol=0, atol=0)
+        else:
+            assert got.layers is None and tp.result.layers is None and torch.equal(buffer, before)
+    assert want.layers.abs().sum() > 0 and not want.layers[torch.from_numpy(~half.reshape(-1))].any()
+
+
 def test_load_pads_with_the_pair_clamp(device, backend, frames):
     """Oracle: the pair clamp of tile_processor.md §1.4 written out in NumPy (an index below 0 takes its parity's
     first row or column, one past the end its parity's last), applied to the frames: the padded buffer equals
@@ -218,7 +242,7 @@ def test_graph_replay_equals_plain_launches(device):
         got = graphed.process(frames, disparity)
         for name in ("clt", "corr", "layers", "valid", "texture"):
             torch.testing.assert_close(getattr(got, name), getattr(want, name), rtol=0, atol=0)
-    assert sorted(graphed._backend.graphs) == [("centres", "convert", "correlate", "texture"), ("pad",)]
+    assert sorted(graphed._backend.graphs) == [("centres", "convert", "correlate", "layers", "texture"), ("pad",)]
 
 
 def test_a_frame_allocates_nothing(backend, frames):

@@ -56,7 +56,7 @@ def pair_directions(rig: Rig, pairs) -> np.ndarray:
 
 def _peaks(engine: DisparityEngine, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Every tile's pair peaks ``(tiles, P, 2)`` and their mean strength ``(tiles,)`` (-inf where a pair has none)."""
-    lags, strength = pair_peaks(engine.measure_at(engine.tp, target.reshape(engine.grid)).corr.double())
+    lags, strength = pair_peaks(engine.measure_at(engine.tp, target.reshape(engine.grid), layers=False).corr.double())
     lags = torch.where(lags.abs().amax(dim=-1, keepdim=True) < REACH, lags, torch.nan)  # rim maxima: no peak
     finite = torch.isfinite(lags).all(dim=-1).all(dim=-1)
     return lags, torch.where(finite, strength.mean(dim=-1), torch.full_like(strength[:, 0], -float("inf")))

@@ -165,7 +165,7 @@ class DisparityEngine:
             self.sparse_index if active is self.sparse_tiles else torch.nonzero(active.reshape(-1))[:, 0])
         for target in targets:
             t = target if isinstance(target, torch.Tensor) else self._uniform.fill_(float(target))
-            corr = self.measure_at(tp, t, active=active).corr
+            corr = self.measure_at(tp, t, active=active, layers=False).corr
             for part, rows in row_chunks(corr, tiles, self.measurer.rows):
                 combined = combine_pairs(self.sampler.sample_uniform(rows, self.sweep_grid))
                 volume.add(t.reshape(-1).index_select(0, part), self.offsets, combined, self.config.reach, part)
@@ -182,9 +182,11 @@ class DisparityEngine:
         """Targets ``(ty, tx)`` into ``tp`` (for a stage run separately, e.g. the texture)."""
         tp.set_targets(**self._targets(tp, target), active=active)
 
-    def measure_at(self, tp: TileProcessor, target: torch.Tensor, active=None):
-        """Convert and correlate ``tp``'s loaded frame at ``target`` (``tp.measure``); returns its ``TileResult``."""
-        return tp.measure(**self._targets(tp, target), active=active)
+    def measure_at(self, tp: TileProcessor, target: torch.Tensor, active=None, layers: bool = True):
+        """Convert and correlate ``tp``'s loaded frame at ``target`` (``tp.measure``, with the network layers
+        unless ``layers`` is False: the engine's own passes read only the correlations); returns its
+        ``TileResult``."""
+        return tp.measure(**self._targets(tp, target), active=active, layers=layers)
 
     def _choose(self, volume: CostVolume) -> tuple[torch.Tensor, torch.Tensor]:
         return volume.choose(self.config.p1, self.config.p2)
@@ -271,7 +273,7 @@ class DisparityEngine:
         tried = torch.zeros(found.numel(), dtype=torch.bool, device=found.device)
         tried[tiles] = True
         target = torch.where(tried.reshape(found.shape), background, found)
-        corr = self.measure_at(self.tp, target, active=tried.reshape(found.shape)).corr
+        corr = self.measure_at(self.tp, target, active=tried.reshape(found.shape), layers=False).corr
         share = tiles.numel() / found.numel()
         done = 0  # the chunks are consecutive runs of ``tiles``: their rows of ``visible`` follow on
         for part, rows in row_chunks(corr, tiles, self.measurer.rows):
@@ -303,7 +305,7 @@ class DisparityEngine:
                 break
             kept = active & ((t - first.target).abs() <= FIRST_BAND) if step == 0 and first is not None else None
             measure = active if kept is None else active & ~kept
-            measured = self.measure_at(self.tp, torch.nan_to_num(t, nan=0.0), active=measure)
+            measured = self.measure_at(self.tp, torch.nan_to_num(t, nan=0.0), active=measure, layers=False)
             finite = measured.finite.view(t.shape)
             passes += float(measure.sum()) / tiles
             d, s = self.measurer.measure(measured.corr, measure.reshape(-1))

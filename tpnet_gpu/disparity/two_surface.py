@@ -66,7 +66,7 @@ def depth_candidates(disparity: torch.Tensor) -> tuple[torch.Tensor, torch.Tenso
 def _passes(engine, target: torch.Tensor, active: torch.Tensor):
     """``(index, corr rows)`` chunks of one pass of ``engine``'s loaded frame at ``target (ty, tx)`` over the
     ``active (ty, tx)`` tiles."""
-    corr = engine.measure_at(engine.tp, torch.nan_to_num(target, nan=0.0), active=active).corr
+    corr = engine.measure_at(engine.tp, torch.nan_to_num(target, nan=0.0), active=active, layers=False).corr
     yield from row_chunks(corr, torch.nonzero(active.reshape(-1), as_tuple=True)[0])
 
 

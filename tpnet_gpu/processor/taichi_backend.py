@@ -67,8 +67,13 @@ class TaichiBackend:
             for step in steps:
                 if step == "pad":
                     taichi_frames.pad_frames(self.frames_t if frames is None else frames, self._v(self.b.padded))
-                elif step in ("convert", "fused", "convert_texture"):
+                elif step == "fused":  # with the layers when they are asked for (made inside the fused kernel)
+                    self._fused(masked, "layers" in steps)
+                elif step in ("convert", "convert_texture"):
                     getattr(self, "_" + step)(masked)
+                elif step == "layers":
+                    if "fused" not in steps:
+                        self._layers()
                 else:
                     getattr(self, "_" + step)()
             if self.cuda:
@@ -91,15 +96,16 @@ class TaichiBackend:
             v(clt), v(finite), v(valid),
         )
 
-    def _fused(self, masked: bool) -> None:
+    def _fused(self, masked: bool, layers: bool) -> None:
         b, geo, cfg, v = self.b, self.geo, self.config, self._v
+        layers = layers and b.layers is not None
         taichi_fused.fused_tiles(
             v(b.padded), v(b.centres), v(b.active if masked else b.all_active), v(b.masks), v(b.kernels),
             b.kernel_grid[0], b.kernel_grid[1], int(b.use_kernels), geo.height, geo.width, geo.colours,
             v(b.used_colours), v(b.used_positions), v(b.used_weights), v(b.pairs), cfg.fat_zero, v(b.lpf_rb),
-            v(b.lpf_corr), v(b.unfold_index), v(b.unfold_sign), cfg.net_offset, b.layers is not None, v(b.tasks),
+            v(b.lpf_corr), v(b.unfold_index), v(b.unfold_sign), cfg.net_offset, layers, v(b.tasks),
             v(b.count), v(b.scratch), v(b.corr),
-            self.no_layers if b.layers is None else v(b.layers), v(b.finite), v(b.valid), v(b.written),
+            v(b.layers) if layers else self.no_layers, v(b.finite), v(b.valid), v(b.written),
             v(b.layers_written),
         )
 
@@ -109,9 +115,13 @@ class TaichiBackend:
             v(b.clt), v(b.finite), v(b.pairs), geo.cams, geo.colours, v(b.used_colours), v(b.used_weights),
             cfg.fat_zero, v(b.lpf_rb), v(b.lpf_corr), v(b.unfold_index), v(b.unfold_sign), v(b.corr),
         )
-        v(b.written).fill_(1)  # every tile's correlations (layers) were written, zero where not finite
+        v(b.written).fill_(1)  # every tile's correlations were written, zero where not finite
+
+    def _layers(self) -> None:
+        """The network layers of every tile from its correlations (quad pairs; else none to make)."""
+        b, v = self.b, self._v
         if b.layers is not None:
-            taichi_correlate.network_layers(v(b.corr), cfg.net_offset, v(b.layers))
+            taichi_correlate.network_layers(v(b.corr), self.config.net_offset, v(b.layers))
             v(b.layers_written).fill_(1)
 
     def _convert_texture(self, masked: bool) -> None:

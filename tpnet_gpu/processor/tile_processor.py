@@ -14,7 +14,8 @@ whole-frame CLT buffer (~1 GB at 2592x1936 quad) exists only with ``clt=True``; 
 converts the tiles for the texture band by band (``TEXTURE_BAND_ROWS`` tile rows) into a band-sized buffer, so its
 ``measure`` and ``process`` correlate fused. With ``clt=True``, ``texture`` converts the tiles first when the last
 targets have not been converted. Both paths give the same correlations, layers and masks (tests compare each
-to the float64 reference); without the buffer ``result.clt`` is None.
+to the float64 reference); without the buffer ``result.clt`` is None. The network layers (quad pairs) are a
+step of their own (``measure(layers=False)`` leaves them out: ``result.layers`` is then None).
 
 Threads: a processor belongs to the thread that first gives it work (``load``, ``set_targets`` or a stage); a
 call from any other thread while that one is alive raises ``RuntimeError`` - its results are views that another
@@ -26,6 +27,7 @@ them. Build one processor per thread (launches of several processors are seriali
 from __future__ import annotations
 
 import threading
+from dataclasses import replace
 
 import torch
 import warp as wp
@@ -110,6 +112,8 @@ class TileProcessor:
         else:
             self._backend = WarpBackend(geo, self.config, self.texture_config, self._buffers, graph=self.graph)
         self._masked = False  # the last targets came with an active mask
+        self._layers_made = True  # the last correlations came with their layers (measure(layers=False): not)
+        self._without_layers = replace(self._buffers.result, layers=None)
         self._ideal = True  # the last targets were disparities (centres computed on the device)
         self._frame_count = 0
         self._owner: threading.Thread | None = None  # the thread whose calls the result views belong to
@@ -144,8 +148,9 @@ class TileProcessor:
 
     @property
     def result(self) -> TileResult:
-        """The output views (what ``process`` returns), as the stages last left them."""
-        return self._buffers.result
+        """The output views (what ``process`` returns), as the stages last left them (``layers`` None after a
+        ``measure(layers=False)``)."""
+        return self._buffers.result if self._layers_made else self._without_layers
 
     # --- per frame ---------------------------------------------------------------------------------------------
     def load(self, frames) -> None:
@@ -189,7 +194,7 @@ class TileProcessor:
         self._ideal = centres is None
         self._converted = False
 
-    def measure(self, target_disparity=None, *, centres=None, active=None) -> TileResult:
+    def measure(self, target_disparity=None, *, centres=None, active=None, layers: bool = True) -> TileResult:
         """Convert and correlate the loaded frames at new targets.
 
         Args:
@@ -198,12 +203,15 @@ class TileProcessor:
             centres: ``(tiles, cams, 2)`` per-camera tile centres (x, y) in pixels, e.g. from a calibrated
                 camera model; NaN masks the tile.
             active: optional ``(tiles_y, tiles_x)`` bool mask of tiles to process.
+            layers: also make the network layers (a processor of the quad's pairs); False: this pass makes none
+                and its result's ``layers`` is None (the disparity engine reads only the correlations: the layers
+                are ~8 % of a fused pass on the CPU).
 
         Returns:
             TileResult of torch tensors on the processor's device (views, overwritten by the next call).
         """
         self.set_targets(target_disparity, centres=centres, active=active)
-        self._run(self._pass)  # split with clt=True, else fused (module docstring)
+        self._run(self._pass(layers))  # split with clt=True, else fused (module docstring)
         return self.result
 
     def process(self, frames, target_disparity=None, *, centres=None, active=None) -> TileResult:
@@ -211,13 +219,12 @@ class TileProcessor:
         validate.targets(target_disparity, centres)
         self.load(frames)
         self.set_targets(target_disparity, centres=centres, active=active)
-        self._run((*self._pass, self._texture_step) if self.textures else self._pass)
+        self._run((*self._pass(), self._texture_step) if self.textures else self._pass())
         return self.result
 
-    @property
-    def _pass(self) -> tuple[str, ...]:
-        """The steps of one measurement: split when the CLT tiles are kept, else fused."""
-        return ("convert", "correlate") if self.keeps_clt else ("fused",)
+    def _pass(self, layers: bool = True) -> tuple[str, ...]:
+        """The steps of one measurement: split when the CLT tiles are kept, else fused; then the layers."""
+        return (*(("convert", "correlate") if self.keeps_clt else ("fused",)), *(("layers",) if layers else ()))
 
     @property
     def _texture_step(self) -> str:
@@ -244,6 +251,8 @@ class TileProcessor:
             steps = ("centres", *steps)
         self._backend.run(steps, frames=None, masked=self._masked)
         self._converted = self._converted or "convert" in steps
+        if "correlate" in steps or "fused" in steps:  # the correlations are new: so are the layers, or none
+            self._layers_made = "layers" in steps
 
     # --- stages (public so benchmarks can time them; ``process`` runs them in order) ----------------------------
     def prepare(self, frames, target_disparity=None, *, centres=None, active=None) -> None:
@@ -263,12 +272,12 @@ class TileProcessor:
     def correlate(self) -> None:
         """Stage 2: CLT tiles -> pair correlations (and the network layers for the quad's pairs)."""
         self._need_clt("correlate")
-        self._run(("correlate",))
+        self._run(("correlate", "layers"))
 
     def fused(self) -> None:
         """Stages 1 + 2 in one pass without the CLT tiles: padded frames and centres -> correlations, layers,
         finite and valid masks (what ``measure`` runs on a processor that does not keep the CLT tiles)."""
-        self._run(("fused",))
+        self._run(("fused", "layers"))
 
     def _need_clt(self, stage: str) -> None:
         if self._buffers.clt is None:

@@ -136,9 +136,9 @@ class WarpBackend:
             [b.corr],
         )
         b.written.fill_(True)  # every tile's correlations were written (zero where not finite)
-        self._layers()
 
     def _layers(self) -> None:
+        """The network layers of every tile from its correlations (quad pairs; else none to make)."""
         b = self.b
         if b.layers is not None:
             self._thread_launch(correlate.network_layers, b.layers.shape, [b.corr, self.config.net_offset],
@@ -157,7 +157,6 @@ class WarpBackend:
                     b.lpf_corr, b.lags_cos, b.lags_sin, b.freqs_cos, b.freqs_sin, b.scratch],
             outputs=[b.corr, b.finite, b.valid], block_dim=self.block_dim, device=self.device,
         )
-        self._layers()
 
     def _convert_texture(self, masked: bool) -> None:
         self._texture(convert=True, masked=masked)
