@@ -7,7 +7,8 @@ sparse neighbours' answers), read the same way within +-``reach`` px and aggrega
 full-range sweep of only the tiles whose choice is doubtful, then the tiles beside a nearer surface read at the
 background around them with only the pairs whose cameras that surface does not hide (``occlusion.Occlusion``),
 chosen again; (3) refinement - re-correlation at target + residual (secant step on a sign flip) on the tiles
-that still move (the processor's ``active`` mask, so a pass costs only those tiles), and a consistency pass:
+that still move (the processor's ``active`` mask, so a pass costs only those tiles; a tile whose choice stayed
+within ``FIRST_BAND`` of its step-(2) start takes that pass's measurement as its first), and a consistency pass:
 tiles that disagree with their neighbours' median are refined again from it; (4) the tile grid: weak outliers
 onto their surface, unmeasured tiles with a clear first-stage answer filled from their surface (``grid``).
 ``tile_passes`` counts tiles x cameras processed per frame in units of one full-resolution pass (a pass over a
