@@ -54,8 +54,9 @@ def ideal_tile_centres(disparity: F32_2D, offsets: F32_2D, centres: F32_3D):
     disparity: (tiles_y, tiles_x) px; offsets: (cams, 2) r_i in baselines; centres out: (tiles, cams, 2) (x, y)
     in that camera's pixels, c = (8 tx + 4, 8 ty + 4)."""
     tiles_x = disparity.shape[1]
-    for ty, tx, cam in ti.ndrange(disparity.shape[0], tiles_x, offsets.shape[0]):
+    for ty, tx in ti.ndrange(disparity.shape[0], tiles_x):  # a thread per tile, its cameras in turn
         d = disparity[ty, tx]
         tile = ty * tiles_x + tx
-        centres[tile, cam, 0] = ti.cast(TILE_STEP * tx + TILE_STEP // 2, ti.f32) - d * offsets[cam, 0]
-        centres[tile, cam, 1] = ti.cast(TILE_STEP * ty + TILE_STEP // 2, ti.f32) - d * offsets[cam, 1]
+        for cam in range(offsets.shape[0]):
+            centres[tile, cam, 0] = ti.cast(TILE_STEP * tx + TILE_STEP // 2, ti.f32) - d * offsets[cam, 0]
+            centres[tile, cam, 1] = ti.cast(TILE_STEP * ty + TILE_STEP // 2, ti.f32) - d * offsets[cam, 1]
