@@ -14,7 +14,7 @@ from torch import Tensor
 
 from tpnet_gpu.net.checks import clone_list, frame_grid
 from tpnet_gpu.net.model import (
-    CLONE_RADII, CLUSTER_SIDE, CLUSTER_TILES, CORR_SIZE, NEGATIVE_SLOPE, Layer, _check_layers, clone_masks,
+    CLONE_RADII, CLUSTER_SIDE, CLUSTER_TILES, CORR_SIZE, NEGATIVE_SLOPE, Layer, check_layers, clone_masks,
     stage1_features, stage2_output, tile_inputs,
 )
 from tpnet_gpu.net.neighbours import CLUSTER_RADIUS, frame_relative_targets
@@ -54,13 +54,10 @@ def frame_stage1(layers: Tensor, target: Tensor, stage1: Sequence[Layer], *, ste
     if not steps or ty * tx <= STAGE1_TILES:
         return stage1_features(tile_inputs(layers, target), stage1)
     layers, target = layers.reshape(ty * tx, *layers.shape[2:]), target.reshape(-1)
-    features = None
+    features = layers.new_empty((ty * tx, stage1[-1][0].shape[0]))
     for start in range(0, ty * tx, STAGE1_TILES):
         rows = slice(start, start + STAGE1_TILES)
-        part = stage1_features(tile_inputs(layers[rows], target[rows]), stage1)
-        if features is None:
-            features = part.new_empty((ty * tx, part.shape[-1]))
-        features[rows] = part
+        features[rows] = stage1_features(tile_inputs(layers[rows], target[rows]), stage1)
     return features.view(ty, tx, -1)
 
 
@@ -89,7 +86,7 @@ def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stag
         TypeError / ValueError: bad shapes, dtypes (inputs must have the parameters' dtype, ``active`` bool),
         devices that differ, or a bad ``clone``.
     """
-    g = _check_layers(stage1, stage2)
+    g = check_layers(stage1, stage2)
     clones, single = clone_list(clone, len(CLONE_RADII))
     tile_shape = (g, CORR_SIZE, CORR_SIZE)
     ty, tx = frame_grid(layers, target, active, grid, tile_shape, stage1[0][0])

@@ -60,7 +60,7 @@ Layer = tuple[Tensor, Tensor]  # (weight (out, in), bias (out,)) as in nn.Linear
 
 
 # ---------------------------------------------------------------------------------------------- checks
-def _check_layers(stage1: Sequence[Layer], stage2: Sequence[Layer]) -> int:
+def check_layers(stage1: Sequence[Layer], stage2: Sequence[Layer]) -> int:
     if len(stage1) < 1 or len(stage2) < 1:
         raise ValueError(f"stage1/stage2: expected at least one layer each, got {len(stage1)} and {len(stage2)}")
     inputs = stage1[0][0].shape[1]
@@ -190,7 +190,7 @@ def clusters_residual(x: Tensor, stage1: Sequence[Layer], stage2: Sequence[Layer
         TypeError / ValueError: ``x`` not a float tensor of shape (B, 25, 325), or not on the parameters'
         device / dtype.
     """
-    _check_layers(stage1, stage2)
+    check_layers(stage1, stage2)
     check_tensor("x", x)
     if x.dim() != 3 or tuple(x.shape[1:]) != (CLUSTER_TILES, stage1[0][0].shape[1]):
         raise ValueError(f"x: expected shape (B, {CLUSTER_TILES}, {stage1[0][0].shape[1]}), got {tuple(x.shape)}")
