@@ -22,7 +22,7 @@ from tpnet_gpu.net.neighbours import CLUSTER_RADIUS, frame_relative_targets
 # Tiles per step of the whole-frame stage 1 (``frame_stage1``) and stage 2 (``frame_stage2``, whole grid rows):
 # bounds their temporaries - at 5 MPix stage 1's inputs and first layer for all 78408 tiles at once are ~180 MB,
 # stage 2's hidden layer 80 MB and a copy of it: most of a frame's peak memory above the buffers.
-STAGE1_TILES = 16384
+STEP_TILES = 16384
 
 
 def stage2_conv(first: Layer, clones: Sequence[int]) -> tuple[Tensor, Tensor, Tensor]:
@@ -41,7 +41,7 @@ def stage2_conv(first: Layer, clones: Sequence[int]) -> tuple[Tensor, Tensor, Te
 
 
 def frame_stage1(layers: Tensor, target: Tensor, stage1: Sequence[Layer], *, steps: bool = True) -> Tensor:
-    """Stage 1 of every tile of a frame, ``STAGE1_TILES`` tiles at a time (the same rows as all at once), or all at
+    """Stage 1 of every tile of a frame, ``STEP_TILES`` tiles at a time (the same rows as all at once), or all at
     once without ``steps``.
 
     Args:
@@ -51,12 +51,12 @@ def frame_stage1(layers: Tensor, target: Tensor, stage1: Sequence[Layer], *, ste
         :math:`(ty, tx, F)` features.
     """
     ty, tx = target.shape
-    if not steps or ty * tx <= STAGE1_TILES:
+    if not steps or ty * tx <= STEP_TILES:
         return stage1_features(tile_inputs(layers, target), stage1)
     layers, target = layers.reshape(ty * tx, *layers.shape[2:]), target.reshape(-1)
     features = layers.new_empty((ty * tx, stage1[-1][0].shape[0]))
-    for start in range(0, ty * tx, STAGE1_TILES):
-        rows = slice(start, start + STAGE1_TILES)
+    for start in range(0, ty * tx, STEP_TILES):
+        rows = slice(start, start + STEP_TILES)
         features[rows] = stage1_features(tile_inputs(layers[rows], target[rows]), stage1)
     return features.view(ty, tx, -1)
 
@@ -75,7 +75,7 @@ def frame_residual(layers: Tensor, target: Tensor, stage1: Sequence[Layer], stag
         active: optional :math:`(ty, tx)` bool; inactive tiles get zero stage-1 features.
         clone: 0, 1 or 2 (5x5, 3x3, centre-only stage 2), or a sequence of them (stage 1 runs once).
         conv: ``stage2_conv(stage2[0], clones)`` when the caller keeps it (else made here).
-        steps: stage 1 and stage 2 in steps of ``STAGE1_TILES`` tiles (the same values, less memory); False: the
+        steps: stage 1 and stage 2 in steps of ``STEP_TILES`` tiles (the same values, less memory); False: the
             whole frame at once (what ``torch.export`` can trace with the tile counts symbolic, net/export.py).
 
     Returns:
@@ -127,7 +127,7 @@ def frame_stage2(features: Tensor, target: Tensor, stage2: Sequence[Layer], clon
         return z.squeeze(-1) if len(stage2) == 1 else stage2_output(F.leaky_relu(z, NEGATIVE_SLOPE, inplace=True),
                                                                     stage2[1:])
 
-    rows = max(1, STAGE1_TILES // tx)  # grid rows per step
+    rows = max(1, STEP_TILES // tx)  # grid rows per step
     if not steps or rows >= ty:  # no python loop over the rows: torch.export keeps ty symbolic
         return grid_rows(0, ty)
     out = features.new_empty((ty, tx, n))

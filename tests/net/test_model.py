@@ -108,12 +108,12 @@ def test_gather_clusters_equals_clipped_loops():
 @pytest.mark.parametrize("step_tiles", [None, 5, 20])
 def test_frame_form_equals_cluster_form(torch_device, step_tiles, monkeypatch):
     """Oracle: forward_clusters on loop-cut clusters (edge tiles replicated by clipping); atol 1e-5. Also with
-    the frame's stage 1 and stage 2 in steps of a few tiles (``STAGE1_TILES``: 5 -> 13 steps of stage 1 and one
+    the frame's stage 1 and stage 2 in steps of a few tiles (``STEP_TILES``: 5 -> 13 steps of stage 1 and one
     grid row per step of stage 2; 20 -> 4 and 2 rows)."""
     from tpnet_gpu.net import frame  # noqa: PLC0415
 
     if step_tiles is not None:
-        monkeypatch.setattr(frame, "STAGE1_TILES", step_tiles)
+        monkeypatch.setattr(frame, "STEP_TILES", step_tiles)
     torch.manual_seed(1)
     net = TPNet().to(torch_device)
     layers, target = _frame(device=torch_device)
