@@ -76,15 +76,14 @@ def test_network_passes_read_only_the_tiles_the_result_depends_on(frames, weight
     result = pipe.process(flat)
     names = ("disparity", "confidence", "initial", "texture", "search")
     masked = {name: getattr(result, name).clone() for name in names}  # views, valid until the next frame
-    network_reads = read
-    assert len(network_reads) == passes
+    assert len(read) == passes
     measured = torch.isfinite(masked["initial"])
     assert (~measured).sum() >= 8 and measured.sum() >= 8
-    for done, active in enumerate(network_reads):
+    for done, active in enumerate(read):
         radius = 2 * (passes - done)
         expected = torch.nn.functional.max_pool2d(measured.float()[None, None], 2 * radius + 1, 1, radius)[0, 0] > 0
         assert torch.equal(active, expected)
-    assert not network_reads[0].all()  # some tiles are skipped
+    assert not read[0].all()  # some tiles are skipped
     monkeypatch.setattr(pipeline_module, "grow", lambda mask, *_: torch.ones_like(mask))
     full = pipe.process(flat)
     for name in names:
