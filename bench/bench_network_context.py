@@ -10,10 +10,10 @@ the check scenes (where the choice was confirmed). Per scene: the disparity engi
 answer (its first-stage answer where it measured none, as the pipeline runs them), and context steps applied to
 the network's output on the engine's measured tiles:
 
-* **shipped**: ``context_step``, the strength-weighted mean of the 3x3 tiles within 0.5 px of the tile itself;
-* **variants**: another band, a 5x5 window, no weights, the engine's confidence as weights, the surface taken
-  as the tiles within the band of the window's median instead of the tile's own value, two-depth tiles
-  (``grid.two_depth``) left alone, and the plain 3x3 median (network.md §10's analysis: where the tile lies
+* **shipped**: ``context_step``, the strength-weighted mean of the 5x5 tiles within 0.5 px of the tile itself;
+* **variants** (each one change from the shipped step): another band, a 3x3 window (v4's step), no weights, the
+  engine's confidence as weights, the surface taken as the tiles within the band of the window's median instead
+  of the tile's own value, two-depth tiles (``grid.two_depth``) left alone, and the plain 3x3 median (network.md §10's analysis: where the tile lies
   within 0.5 px of its window's median, the median);
 * **between passes**: the shipped step after the first pass, then the second pass (and the step again);
 * **engine + shipped**: the step on the engine's own answer (the peer: what the step gives without the network).
@@ -30,14 +30,14 @@ import sys
 
 import numpy as np
 import torch
+from tpnet_gpu.net import infer
+from tpnet_gpu.net.context import CONTEXT_BAND, CONTEXT_SIZE, context_step
+from tpnet_gpu.net.layers import NetworkLayers
 
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.disparity import DisparityEngine
 from tpnet_gpu.disparity.grid import neighbourhood, two_depth, weighted_mean
 from tpnet_gpu.evaluation import error_stats, is_gross, reference_inliers, tile_classes
-from tpnet_gpu.net import infer
-from tpnet_gpu.net.context import CONTEXT_BAND, context_step
-from tpnet_gpu.net.layers import NetworkLayers
 from tpnet_gpu.processor import TileProcessor
 from tpnet_gpu.scenes import Sensor, random_scene, render
 
@@ -49,7 +49,7 @@ CLASSES = ("flat", "edge", "all")
 SHIPPED = "TPNET + shipped step"
 
 
-def variant(disparity: torch.Tensor, weight: torch.Tensor, *, size: int = 3, band: float = CONTEXT_BAND,
+def variant(disparity: torch.Tensor, weight: torch.Tensor, *, size: int = CONTEXT_SIZE, band: float = CONTEXT_BAND,
             surface: str = "own", skip: torch.Tensor | None = None) -> torch.Tensor:
     """A context step of the family the shipped one belongs to: ``disparity (ty, tx)`` (NaN = none), each finite
     tile replaced by the ``weight``-weighted mean of its ``size`` x ``size`` tiles on its surface: those within
@@ -73,12 +73,12 @@ def variant(disparity: torch.Tensor, weight: torch.Tensor, *, size: int = 3, ban
 VARIANTS = {  # name -> (weight: "strength", "confidence" or "ones"; variant's keywords)
     "band 0.25 px": ("strength", {"band": 0.25}),
     "band 1 px": ("strength", {"band": 1.0}),
-    "5x5": ("strength", {"size": 5}),
+    "3x3": ("strength", {"size": 3}),
     "no weights": ("ones", {}),
     "confidence weights": ("confidence", {}),
     "surface from the median": ("strength", {"surface": "median"}),
     "two-depth tiles skipped": ("strength", {"skip": "two_depth"}),
-    "3x3 median (§10)": ("strength", {"surface": "median only"}),
+    "3x3 median (§10)": ("strength", {"surface": "median only", "size": 3}),
 }
 
 

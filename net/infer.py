@@ -17,7 +17,7 @@ from tpnet_gpu.net.layers import QUAD_LAGS, lags_match
 from tpnet_gpu.net.model import TPNet
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
-DEFAULT_WEIGHTS = WEIGHTS_DIR / "tpnet_synthetic_v5.pt"
+DEFAULT_WEIGHTS = WEIGHTS_DIR / "tpnet_synthetic_v6.pt"
 
 
 def load(path=None, device=None) -> TPNet:

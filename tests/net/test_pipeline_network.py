@@ -28,9 +28,10 @@ from tpnet_gpu.scenes.folder import save
 WIDTH, HEIGHT, SEED = 320, 240, 7
 # RMSE(network) / RMSE(initial targets) on the flat tiles where the initial target is within 1 px of the ground
 # truth. Measured with the shipped weights and the context step on this scene (demo, 320x240, noise on), seeds
-# 1-10: v5 0.33-0.47 (seed 7: 0.335); v4 0.37-0.50 (seed 7: 0.37; the network alone: 0.54-0.63); an identity
-# network followed by the context step gives 0.60-0.73 (seed 7: 0.69), without the step exactly 1.0.
-MAX_RATIO = 0.55
+# 1-10: v6 with the 5x5 step 0.30-0.43 (seed 7: 0.296), an identity network followed by that step 0.52-0.60
+# (seed 7: 0.572), without the step exactly 1.0. Before (the 3x3 step): v5 0.33-0.47 (seed 7: 0.335); v4
+# 0.37-0.50 (seed 7: 0.37; the network alone: 0.54-0.63); the identity network and the step 0.60-0.73.
+MAX_RATIO = 0.45
 MIN_TILES = 300  # flat tiles with the initial within 1 px: ~420 on this scene
 
 
@@ -67,7 +68,7 @@ def moved_share(disparity: np.ndarray, initial: np.ndarray) -> float:
 
 def test_network_beats_its_initial_targets(scene):
     """Oracle: the rendered ground truth. Tolerance: RMSE(pipeline) <= MAX_RATIO x RMSE(initial) on >= 300 flat
-    tiles where the initial is within 1 px (measured above; an identity network and the step give 0.60-0.73)."""
+    tiles where the initial is within 1 px (measured above; an identity network and the step give 0.52-0.60)."""
     rendered, _, result = scene
     ratio, tiles = network_gain(rendered, result["disparity"], result["initial"])
     assert tiles >= MIN_TILES
@@ -100,7 +101,7 @@ def test_pipeline_returns_the_networks_output(scene):
 def test_identity_network_fails_the_accuracy_criterion(scene, monkeypatch):
     """The accuracy test can fail: with ``infer.infer`` returning its input (patched before the pipeline is
     built: it keeps the function it found) the pipeline's disparity is its initial targets after the context step
-    and the ratio of test_network_beats_its_initial_targets is 0.69 (> 0.55)."""
+    and the ratio of test_network_beats_its_initial_targets is 0.57 (> 0.45)."""
     rendered, frames, _ = scene
     monkeypatch.setattr(infer, "infer", lambda model, layers, target, grid=None, active=None: target.clone())
     result = Pipeline(HEIGHT, WIDTH, cfa=rendered.sensor.cfa, device="cpu").process(frames)

@@ -65,12 +65,12 @@ def weighted_mean(windows: torch.Tensor, weights: torch.Tensor, same: torch.Tens
     return (w * torch.nan_to_num(windows)).sum(dim=-1) / total.clamp(min=1e-12), total
 
 
-def surface_mean(disparity: torch.Tensor, strength: torch.Tensor, centre: torch.Tensor, band: float):
-    """``(mean, total)``, each ``(ty, tx)``: the ``strength``-weighted mean of the finite tiles of each tile's 3x3
-    neighbourhood of ``disparity (ty, tx)`` (itself included) within ``band`` px of ``centre (ty, tx)``, and
-    their summed weight (``weighted_mean``; 0: none)."""
-    windows = neighbourhood(disparity)
-    weights = neighbourhood(torch.where(torch.isfinite(disparity), strength, 0.0))
+def surface_mean(disparity: torch.Tensor, strength: torch.Tensor, centre: torch.Tensor, band: float, size: int = 3):
+    """``(mean, total)``, each ``(ty, tx)``: the ``strength``-weighted mean of the finite tiles of each tile's
+    ``size`` x ``size`` neighbourhood of ``disparity (ty, tx)`` (itself included) within ``band`` px of ``centre
+    (ty, tx)``, and their summed weight (``weighted_mean``; 0: none)."""
+    windows = neighbourhood(disparity, size)
+    weights = neighbourhood(torch.where(torch.isfinite(disparity), strength, 0.0), size)
     return weighted_mean(windows, weights, (windows - centre[..., None]).abs() <= band)  # False for NaN
 
 
