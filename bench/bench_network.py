@@ -14,9 +14,10 @@ Scored per class (tpnet_gpu/evaluation.py): strict and either-surface gross, own
 tiles the old loop gets within 1 px (the paper's protocol), tiles made gross that it had right, coverage,
 confidence ranking, tile-processor passes and seconds per frame (the engine timed warm).
 ``--rig FILE`` (a rig file or a shipped one, at the bench's size when ideal) renders the scenes with that rig; a rig
-other than the quad has neither the old loop nor the LMA (quad only): its methods are the engine and TPNET with the
-weights trained for its layer lags (default: the shipped ones), scored against the engine. Table + JSON + PNG (the PNG needs matplotlib,
-of the optional ``bench`` extra).
+other than the quad has no old loop (quad only): its methods are the engine (and the engine with the LMA where its
+pairs lie along quad pairs, ``disparity.measure.lma_slots``: the binocular rig) and TPNET with the weights trained
+for its layer lags (default: the shipped ones), scored against the engine. Table + JSON + PNG (the PNG needs
+matplotlib, of the optional ``bench`` extra).
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ from tpnet_gpu import rigfile
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import EngineConfig
 from tpnet_gpu.disparity import DisparityEngine
+from tpnet_gpu.disparity.measure import lma_slots
+from tpnet_gpu.disparity.pairs import default_pairs, pair_vectors
 from tpnet_gpu.net import infer
 from tpnet_gpu.net.context import context_step
 from tpnet_gpu.net.layers import QUAD_LAGS, NetworkLayers, lags_match, rig_lags
@@ -84,7 +87,9 @@ def main(argv=None) -> dict:
         rig = rigfile.load(args.rig)
         rig = replace(rig, width=args.width, height=args.height, _cache={}) if rig.is_ideal() else rig
     quad = lags_match(rig_lags(rig.offsets), QUAD_LAGS)
-    engine_names = ENGINES if quad else {ENGINE: "axis"}  # the LMA and the old loop: the quad's only
+    # the old loop is the quad's only; the LMA also takes rigs whose pairs lie along quad pairs (binocular)
+    lma = quad or lma_slots(pair_vectors(rig.offsets, default_pairs(rig.offsets))) is not None
+    engine_names = ENGINES if lma else {ENGINE: "axis"}
     weights = args.weights if args.weights is not None else infer.shipped_for(rig_lags(rig.offsets))
     if weights is None:
         parser.error(f"--weights: no shipped TPNET weights for this rig (layer lags {rig_lags(rig.offsets)})")

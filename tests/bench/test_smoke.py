@@ -153,7 +153,8 @@ def test_bench_network(tmp_path, capsys):
 
 
 def test_bench_network_binocular(tmp_path, capsys):
-    """``--rig binocular``: no old loop and no LMA (quad only); TPNET with one-layer weights, against the engine."""
+    """``--rig binocular``: no old loop (quad only), the engine with the LMA (its pair in the quad's pair-0 slot);
+    TPNET with one-layer weights, against the engine."""
     from tpnet_gpu.net.model import TPNet  # noqa: PLC0415
 
     weights = tmp_path / "bino.pt"
@@ -162,9 +163,9 @@ def test_bench_network_binocular(tmp_path, capsys):
     argv = ["--scenes", "1", "--passes", "1", "--height", "64", "--width", "64", "--png", "", "--rig", "binocular",
             "--weights", str(weights)]
     report, out, err = run_bench(bench_network, argv, tmp_path, capsys)
-    assert list(report["stats"]) == ["engine", "TPNET (1 pass, no context)", "TPNET (1 pass)"]
+    assert list(report["stats"]) == ["engine", "engine (LMA)", "TPNET (1 pass, no context)", "TPNET (1 pass)"]
     assert report["rig"] == "binocular"
-    _check_accuracy(report, {"engine"})
+    _check_accuracy(report, {"engine", "engine (LMA)"})
     assert "rig binocular (2 cameras)" in report["table"][0]
     torch.save(TPNet().state_dict(), tmp_path / "quad.pt")  # no recipe: the quad's lags
     with pytest.raises(SystemExit):  # quad weights for a binocular rig: refused by the parser

@@ -1,13 +1,15 @@
-"""Per-tile peak measurement (tpnet_gpu/disparity/measure.py): ``Peak2D``. Oracle: synthetic correlations with a
-Gaussian peak at a known 2-D lag, each lag's value scaled by the windows' overlap at that lag (what windowing does
-to the correlation of a shifted tile: the envelope the measurement divides out)."""
+"""Per-tile peak measurement (tpnet_gpu/disparity/measure.py): ``Peak2D`` and the LMA's quad slots. Oracle:
+synthetic correlations with a Gaussian peak at a known 2-D lag, each lag's value scaled by the windows' overlap at
+that lag (what windowing does to the correlation of a shifted tile: the envelope the measurement divides out);
+pair directions worked out by hand from the cameras' offsets."""
 
 import numpy as np
 import pytest
 import torch
 
-from tpnet_gpu.disparity.measure import Peak2D, parabola_step
-from tpnet_gpu.disparity.pairs import window_overlap
+from tpnet_gpu import tables
+from tpnet_gpu.disparity.measure import Peak2D, lma_slots, parabola_step
+from tpnet_gpu.disparity.pairs import pair_vectors, window_overlap
 
 
 def _peaks(points, sigma=1.2):
@@ -58,3 +60,17 @@ def test_row_chunks_into_a_buffer_are_the_named_rows():
         seen.append(part)
     assert torch.equal(torch.cat(seen), index) and len(seen) == 2
     assert buffer.rows(x, 1).data_ptr() == buffer.rows(x, 5).data_ptr()  # one buffer
+
+
+@pytest.mark.parametrize("offsets, pairs, slots", [
+    (tables.QUAD_OFFSETS, tables.QUAD_PAIRS, (0, 1, 2, 3, 4, 5)),  # the quad's own order
+    (((-0.5, 0.0), (0.5, 0.0)), ((0, 1),), (0,)),  # binocular: lag (1, 0), the quad's top pair
+    (((0.0, -0.5), (0.0, 0.5)), ((0, 1),), (2,)),  # one above the other: (0, 1), the left column pair
+    (((0.5, 0.0), (-0.5, 0.0)), ((0, 1),), None),  # (-1, 0): no quad pair points that way
+    (((-1.0, 0.0), (1.0, 0.0)), ((0, 1),), None),  # (2, 0): twice the quad's baseline
+    (((-0.5, 0.0), (0.5, 0.0), (1.5, 0.0)), ((0, 1), (1, 2)), (0, 1)),  # two (1, 0) pairs: both horizontal slots
+    (((-0.5, 0.0), (0.5, 0.0), (1.5, 0.0), (2.5, 0.0)), ((0, 1), (1, 2), (2, 3)), None),  # a third: no slot left
+])
+def test_lma_slots_by_pair_direction(offsets, pairs, slots):
+    """Oracle: the lag vectors r_b - r_a by hand against the quad's (1, 0) x 2, (0, 1) x 2, (1, 1), (1, -1)."""
+    assert lma_slots(pair_vectors(offsets, pairs)) == slots

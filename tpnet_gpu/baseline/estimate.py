@@ -47,16 +47,18 @@ class Measurement:
     by_lma: np.ndarray
 
 
-def measure(corr: np.ndarray, params: BaselineParams = BaselineParams()) -> Measurement:
+def measure(corr: np.ndarray, params: BaselineParams = BaselineParams(), pairs=None) -> Measurement:
     """C.1 on every tile of ``corr (T, 6, 15, 15)``: integer maximum, centre of mass, then the LMA fit where
-    the peak is strong enough; the LMA result replaces the CM one where it succeeds."""
+    the peak is strong enough; the LMA result replaces the CM one where it succeeds. ``pairs``: optional bool
+    mask ``(6,)`` of the quad pairs present (a rig with fewer pairs, e.g. a binocular one as pair 0); the
+    others are left out of the strips' combination and of the LMA groups."""
     corr = np.nan_to_num(np.asarray(corr, dtype=np.float64))
-    com = centre_of_mass(combine_strips(pair_strips(corr), params.strips.corr_offset), params.strips)
+    com = centre_of_mass(combine_strips(pair_strips(corr), params.strips.corr_offset, pairs), params.strips)
     residual = com.disparity.copy()
     strength = com.strength.copy()
     by_lma = np.zeros(len(corr), dtype=bool)
     if params.use_lma:
-        ortho, diag, n_ortho, n_diag = combine_groups(corr)
+        ortho, diag, n_ortho, n_diag = combine_groups(corr, pairs)
         start = np.where(np.isfinite(com.x_cm) & (com.strength > params.strips.min_poly_strength), com.x_cm, np.nan)
         fit = fit_peaks(ortho, diag, start, n_ortho=n_ortho, n_diag=n_diag, params=params.lma)
         by_lma = fit.success & np.isfinite(fit.disparity) & np.isfinite(start)

@@ -3,25 +3,29 @@
 
 For the quad's 6 pairs with ``EngineConfig.measure == "lma"`` it is the baseline's measurement (strips -> centre
 of mass -> LMA peak fit, geometry_and_lma.md C.1-C.4; float64 NumPy, so the active tiles' correlations make a
-host round trip); otherwise (any rig, or ``"axis"``) the peak of the pairs' combined correlation read along
-their axes (``pairs.AxisSampler``) at quarter-pixel offsets, refined by a parabola - torch on the device.
-Measured on 4 rendered 640x480 tuning scenes: flat own-inlier RMSE 0.07-0.11 px for both.
+host round trip); a rig whose pairs each lie along one of the quad's pairs (``lma_slots``: a binocular rig's
+pair is the quad's pair 0) gets the same measurement with the other quad pairs masked off. Otherwise (other
+rigs, or ``"axis"``) the peak of the pairs' combined correlation read along their axes (``pairs.AxisSampler``)
+at quarter-pixel offsets, refined by a parabola - torch on the device. Measured on 4 rendered 640x480 tuning
+scenes: flat own-inlier RMSE 0.07-0.11 px for both.
 """
 
 from __future__ import annotations
 
 import functools
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
 from tpnet_gpu import tables
 from tpnet_gpu.baseline.estimate import BaselineParams, measure as lma_measure
 from tpnet_gpu.config import EngineConfig
-from tpnet_gpu.disparity.pairs import AxisSampler, WindowOverlap, combine_pairs
+from tpnet_gpu.disparity.pairs import AxisSampler, WindowOverlap, combine_pairs, pair_vectors
 from tpnet_gpu.layout import CORR_RADIUS
 
 PEAK_OFFSETS = 0.25  # px between the offsets the generic peak is read at
+SLOT_TOLERANCE = 0.02  # baselines: a pair's lag vector within this of a quad pair's takes that pair's LMA slot
 # Tiles read per step after a pass (here and in the engine's sweeps): bounds the temporaries - at 5 MPix a
 # pass's (tiles, pairs, lags) samples would be ~0.2 GB at once, a copy of the active correlations up to 0.4 GB.
 CHUNK = 8192
@@ -73,6 +77,20 @@ def gaussian_blur(corr: torch.Tensor, sigma: float) -> torch.Tensor:
     return x.reshape(corr.shape)
 
 
+def lma_slots(vectors) -> tuple[int, ...] | None:
+    """The quad pair (``tables.QUAD_PAIRS`` order) each pair of lag vectors ``vectors (P, 2)`` (``pair_vectors``,
+    baselines) lies along, within ``SLOT_TOLERANCE``; None when a pair lies along none or two pairs take one
+    slot (the LMA then does not apply). The quad's own pairs give 0..5, a binocular rig's (1, 0) gives (0,)."""
+    quad = pair_vectors(tables.QUAD_OFFSETS, tables.QUAD_PAIRS)
+    slots = []
+    for v in torch.as_tensor(vectors, dtype=torch.float64).cpu().numpy():
+        free = [s for s in range(len(quad)) if s not in slots and abs(quad[s] - v).max() <= SLOT_TOLERANCE]
+        if not free:
+            return None
+        slots.append(free[0])
+    return tuple(slots)
+
+
 class Measurer:
     """``measure(corr (T, P, 15, 15), active (T,)) -> (residual (T,), strength (T,))``, NaN / 0 where none.
 
@@ -83,7 +101,12 @@ class Measurer:
 
     def __init__(self, pairs, sampler: AxisSampler, config: EngineConfig, widen: bool = False):
         self.widen = widen
-        self.lma = tuple(pairs) == tables.QUAD_PAIRS and config.measure == "lma"
+        slots = None
+        if config.measure == "lma":
+            slots = tuple(range(len(pairs))) if tuple(pairs) == tables.QUAD_PAIRS else lma_slots(sampler.vectors)
+        self.lma = slots is not None
+        # a rig with fewer pairs: its correlations go into these quad slots, the others masked off
+        self.slots = None if slots is None or len(slots) == len(tables.QUAD_PAIRS) else slots
         self.sampler = sampler
         self.params = BaselineParams(min_strength=config.min_strength, trust=config.trust, tolerance=config.tolerance)
         reach = min(sampler.reach, config.trust + 1.0)
@@ -98,13 +121,24 @@ class Measurer:
         strength = torch.zeros((tiles,), device=corr.device)
         for index, sub in row_chunks(corr, torch.nonzero(active, as_tuple=True)[0], self.rows):  # bounded
             if self.lma:  # the LMA runs in float64 NumPy (a host round trip of the active tiles)
-                m = lma_measure(sub.detach().cpu().numpy(), self.params)
+                m = self._lma(sub.detach().cpu().numpy())
                 d = torch.as_tensor(m.residual, dtype=torch.float32, device=corr.device)
                 s = torch.as_tensor(m.strength, dtype=torch.float32, device=corr.device)
             else:
                 d, s = self._peak(sub)
             residual[index], strength[index] = d, s
         return residual, strength
+
+    def _lma(self, corr):
+        """The baseline's measurement of ``corr (T, P, 15, 15)`` (NumPy), the rig's pairs in their quad slots."""
+        if self.slots is None:
+            return lma_measure(corr, self.params)
+        quad = len(tables.QUAD_PAIRS)
+        full = np.zeros((corr.shape[0], quad, *corr.shape[2:]), dtype=np.float64)
+        full[:, list(self.slots)] = corr
+        present = np.zeros(quad, dtype=bool)
+        present[list(self.slots)] = True
+        return lma_measure(full, self.params, present)
 
     def _peak(self, corr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Whole-pixel peak of the combined correlation (bilinear, cheap), then ``axis_peak`` around it."""
