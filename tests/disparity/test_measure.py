@@ -8,8 +8,9 @@ import pytest
 import torch
 
 from tpnet_gpu import tables
-from tpnet_gpu.disparity.measure import Peak2D, lma_slots, parabola_step
-from tpnet_gpu.disparity.pairs import pair_vectors, window_overlap
+from tpnet_gpu.config import EngineConfig
+from tpnet_gpu.disparity.measure import Measurer, Peak2D, lma_slots, parabola_step
+from tpnet_gpu.disparity.pairs import AxisSampler, pair_vectors, window_overlap
 
 
 def _peaks(points, sigma=1.2):
@@ -74,3 +75,23 @@ def test_row_chunks_into_a_buffer_are_the_named_rows():
 def test_lma_slots_by_pair_direction(offsets, pairs, slots):
     """Oracle: the lag vectors r_b - r_a by hand against the quad's (1, 0) x 2, (0, 1) x 2, (1, 1), (1, -1)."""
     assert lma_slots(pair_vectors(offsets, pairs)) == slots
+
+
+def test_lma_reads_a_rigs_pairs_in_their_quad_slots():
+    """Oracle: the quad's pairs in reverse order, each pair's synthetic peak at the lag of one known disparity
+    (lag = 1.3 px x its lag vector): the LMA measurement equals the one of the quad's own order, and it finds the
+    shift (a peak at lag +d x the vector reads as residual -d; within 0.1 px on these Gaussian peaks: measured
+    -1.241, the axis measurement -1.287)."""
+    vectors = pair_vectors(tables.QUAD_OFFSETS, tables.QUAD_PAIRS)
+    corr = torch.stack([_peaks([1.3 * v], sigma=1.0)[0] for v in vectors])[None].repeat(3, 1, 1, 1)  # (3, 6, 15, 15)
+    config = EngineConfig(measure="lma")
+
+    def measure(pairs, c):
+        m = Measurer(pairs, AxisSampler(tables.QUAD_OFFSETS, pairs, "cpu"), config)
+        assert m.lma
+        return m.measure(c, torch.ones(3, dtype=torch.bool))
+
+    quad = measure(tables.QUAD_PAIRS, corr)
+    reverse = measure(tables.QUAD_PAIRS[::-1], corr.flip(1))
+    torch.testing.assert_close(reverse, quad)
+    assert torch.isfinite(quad[0]).all() and (quad[0] + 1.3).abs().max() <= 0.1, quad

@@ -105,8 +105,8 @@ class Measurer:
         if config.measure == "lma":
             slots = tuple(range(len(pairs))) if tuple(pairs) == tables.QUAD_PAIRS else lma_slots(sampler.vectors)
         self.lma = slots is not None
-        # a rig with fewer pairs: its correlations go into these quad slots, the others masked off
-        self.slots = None if slots is None or len(slots) == len(tables.QUAD_PAIRS) else slots
+        # other pairs or another order: the correlations go into these quad slots, the slots not taken masked off
+        self.slots = None if slots is None or slots == tuple(range(len(tables.QUAD_PAIRS))) else slots
         self.sampler = sampler
         self.params = BaselineParams(min_strength=config.min_strength, trust=config.trust, tolerance=config.tolerance)
         reach = min(sampler.reach, config.trust + 1.0)
