@@ -13,8 +13,8 @@ the network's output on the engine's measured tiles:
 * **shipped**: ``context_step``, the strength-weighted mean of the 5x5 tiles within 0.5 px of the tile itself;
 * **variants** (each one change from the shipped step): another band, a 3x3 window (v4's step), no weights, the
   engine's confidence as weights, the surface taken as the tiles within the band of the window's median instead
-  of the tile's own value, two-depth tiles (``grid.two_depth``) left alone, and the plain 3x3 median (network.md §10's analysis: where the tile lies
-  within 0.5 px of its window's median, the median);
+  of the tile's own value, two-depth tiles (``grid.two_depth``) left alone, and the plain 3x3 median
+  (network.md §10's analysis: where the tile lies within 0.5 px of its window's median, the median);
 * **between passes**: the shipped step after the first pass, then the second pass (and the step again);
 * **engine + shipped**: the step on the engine's own answer (the peer: what the step gives without the network).
 
@@ -30,14 +30,14 @@ import sys
 
 import numpy as np
 import torch
-from tpnet_gpu.net import infer
-from tpnet_gpu.net.context import CONTEXT_BAND, CONTEXT_SIZE, context_step
-from tpnet_gpu.net.layers import NetworkLayers
 
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.disparity import DisparityEngine
 from tpnet_gpu.disparity.grid import neighbourhood, two_depth, weighted_mean
 from tpnet_gpu.evaluation import error_stats, is_gross, reference_inliers, tile_classes
+from tpnet_gpu.net import infer
+from tpnet_gpu.net.context import CONTEXT_BAND, CONTEXT_SIZE, context_step
+from tpnet_gpu.net.layers import NetworkLayers
 from tpnet_gpu.processor import TileProcessor
 from tpnet_gpu.scenes import Sensor, random_scene, render
 

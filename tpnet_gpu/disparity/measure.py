@@ -106,7 +106,10 @@ class Measurer:
             slots = tuple(range(len(pairs))) if tuple(pairs) == tables.QUAD_PAIRS else lma_slots(sampler.vectors)
         self.lma = slots is not None
         # other pairs or another order: the correlations go into these quad slots, the slots not taken masked off
-        self.slots = None if slots is None or slots == tuple(range(len(tables.QUAD_PAIRS))) else slots
+        self.slots = None if slots is None or slots == tuple(range(len(tables.QUAD_PAIRS))) else list(slots)
+        if self.slots is not None:
+            self.present = np.zeros(len(tables.QUAD_PAIRS), dtype=bool)  # (6,) the quad slots taken
+            self.present[self.slots] = True
         self.sampler = sampler
         self.params = BaselineParams(min_strength=config.min_strength, trust=config.trust, tolerance=config.tolerance)
         reach = min(sampler.reach, config.trust + 1.0)
@@ -133,12 +136,9 @@ class Measurer:
         """The baseline's measurement of ``corr (T, P, 15, 15)`` (NumPy), the rig's pairs in their quad slots."""
         if self.slots is None:
             return lma_measure(corr, self.params)
-        quad = len(tables.QUAD_PAIRS)
-        full = np.zeros((corr.shape[0], quad, *corr.shape[2:]), dtype=np.float64)
-        full[:, list(self.slots)] = corr
-        present = np.zeros(quad, dtype=bool)
-        present[list(self.slots)] = True
-        return lma_measure(full, self.params, present)
+        full = np.zeros((corr.shape[0], len(self.present), *corr.shape[2:]), dtype=np.float64)  # (T, 6, 15, 15)
+        full[:, self.slots] = corr
+        return lma_measure(full, self.params, self.present)
 
     def _peak(self, corr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Whole-pixel peak of the combined correlation (bilinear, cheap), then ``axis_peak`` around it."""
