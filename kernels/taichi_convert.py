@@ -129,7 +129,7 @@ def forward_colour(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32, m
                    bx: ti.template(), by: ti.template()):
     """(16, 16) ``g`` of one colour (module docstring): sum over rows r of by[r, :]^T (x[r, :] bx), x the masked
     window; a row reads only the columns its mask weights (even, odd or both parities), non-finite pixels as 0."""
-    g = ti.Matrix.zero(ti.f32, WINDOW, WINDOW)
+    g = [ti.Vector.zero(ti.f32, WINDOW) for _ in ti.static(range(WINDOW))]  # its rows, as vectors
     for r in range(WINDOW):
         w_even = masks[mask, r, 0]
         w_odd = masks[mask, r, 1]
@@ -141,13 +141,10 @@ def forward_colour(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32, m
                     for j in ti.static(range(N)):
                         v = padded[cam, oy + r, ox + 2 * j + phase]
                         x = ti.select(is_pixel(v), weight * v, 0.0)
-                        for k in ti.static(range(WINDOW)):
-                            t[k] += x * bx[2 * j + phase, k]
+                        t += x * ti.Vector([bx[2 * j + phase, k] for k in ti.static(range(WINDOW))])
             for i in ti.static(range(WINDOW)):
-                b = by[r, i]
-                for k in ti.static(range(WINDOW)):
-                    g[i, k] += b * t[k]
-    return g
+                g[i] += by[r, i] * t
+    return ti.Matrix.rows(g)
 
 
 @ti.func

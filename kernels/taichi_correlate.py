@@ -6,39 +6,31 @@ pair), and by the fused kernel in kernels/taichi_fused.py): per frequency the co
 colour, the colour weights, the R+B low-pass, the fat-zero normalisation and the final low-pass; then the 8-point
 DCT-II/DST-II per quadrant and the lag unfold as a signed gather into the (2r+1)^2 tile (the same operator as
 the Warp kernel's two dense products); the spectrum is made row by row (``spectrum_row``), each row going
-through its column-side transform at once, so it is never stored whole. ``network_layers`` (per element) combines the quad's pairs.
+through its column-side transform at once, so it is never stored whole. ``network_layers`` (per tile, a row at a
+time) combines the quad's pairs.
 
 Speed (CPU): colours of zero weight are skipped (the caller passes the used colours); the 8-point transforms and
-the columns' unfold are compile-time constants (``operators.half_dtt2e``, ``operators.unfold_gather``), and each 8-point
-transform folds its input (x_k +- x_{7-k}, the matrices being (anti)symmetric in k with the parity of m), which
-halves its multiplications.
+the unfold are compile-time constants (``operators.half_dtt2e``, ``operators.unfold_gather``); rows are vectors
+(Taichi keeps them as LLVM vectors, taichi_setup.py): a transform is a sum of constant rows or columns times
+scalars, the packed instructions the CPU has (no folding of the inputs, which halves scalar multiplies but not
+vector ones).
 
-Layouts: ``clt`` (tiles * cams * colours * 4, 8, 8); ``corr`` (tiles * pairs, 15, 15); ``layers``
-(tiles, 4, 9, 9); ``finite`` (tiles,) uint8. Spectra are held as one (16, 16) matrix [vertical cos | sin,
-horizontal cos | sin] as in kernels/taichi_convert.py.
+Layouts: ``clt`` (tiles * cams * colours * 4, 8, 8); ``corr`` (tiles * pairs, 15, 15) and ``layers`` (tiles, 4, 9,
+9), both passed flat (a vector type of 15 or 9 lanes would make Taichi emit aligned vector accesses at unaligned
+rows); ``finite`` (tiles,) uint8.
 """
 
 import taichi as ti
 
 from tpnet_gpu import operators
 from tpnet_gpu.kernels.correlate import CORR_SIDE, NET_CROP
-from tpnet_gpu.kernels.taichi_types import F32_1D, F32_2D, F32_3D, F32_4D, I32_1D, I32_2D, U8_1D, V8_1D, V8_2D
+from tpnet_gpu.kernels.taichi_types import F32_1D, I32_1D, I32_2D, U8_1D, V8_1D, V8_2D
 from tpnet_gpu.layout import FLOAT32_MAX, NET_LAYERS, NET_SIDE
 from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
 
 HALF_DTT2E = operators.half_dtt2e().tolist()  # [sine][m][k], compile-time constants
 _INDEX, _SIGN = operators.unfold_gather()
 UNFOLD_INDEX, UNFOLD_SIGN = _INDEX.tolist(), _SIGN.tolist()  # [sine][lag + 7]
-HALF = N // 2
-
-
-def lag_sign(q: int, r: int, c: int) -> float:
-    """Sign of quadrant q's term at lag (r, c) of the unfold gather (the cosine parts' signs are +1)."""
-    return (UNFOLD_SIGN[1][r] if q >> 1 else 1.0) * (UNFOLD_SIGN[1][c] if q & 1 else 1.0)
-
-
-def lag_col(q: int, c: int) -> int:
-    return N * (q & 1) + UNFOLD_INDEX[q & 1][c]
 
 
 @ti.func
@@ -105,77 +97,64 @@ def spectrum_row(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.te
         if not (energy[kx] >= 1e-30 and energy[kx] <= 1e37):
             inv[kx] = inverse_norm(x0[kx], x1[kx], x2[kx], x3[kx], fat_zero)
     scale = inv * lpf_corr[ky]
-    x = ti.Matrix.zero(ti.f32, 4, N)
-    for kx in ti.static(range(N)):
-        x[0, kx] = x0[kx] * scale[kx]
-        x[1, kx] = x1[kx] * scale[kx]
-        x[2, kx] = x2[kx] * scale[kx]
-        x[3, kx] = x3[kx] * scale[kx]
-    return x
+    return ti.Matrix.rows([x0 * scale, x1 * scale, x2 * scale, x3 * scale])
+
+
+@ti.func
+def dtt2e_column(sine: ti.template(), k: ti.template()):
+    """Column k of the 1/2 DCT-II-e (sine 0) or DST-II-e (sine 1) as a constant vector over m."""
+    return ti.Vector([ti.static(HALF_DTT2E[sine][m][k]) for m in ti.static(range(N))])
 
 
 @ti.func
 def correlate_pair(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.template(), positions: ti.template(),
                    weights: ti.template(), colours: ti.i32, fat_zero: ti.f32, lpf_rb: ti.template(),
-                   lpf_corr: ti.template(), unfold_index: ti.template(), unfold_sign: ti.template(),
-                   corr: ti.template(), out: ti.i32):
-    """corr[out] (15, 15): the phase correlation of one pair = sum_q U_{q>>1} D_{q>>1} X_q D_{q&1}^T U_{q&1}^T,
-    X the spectrum (``spectrum_row``), D the 8-point DCT-II-e / DST-II-e (x 1/2) on both sides, each on folded
-    inputs, U the unfold as a signed gather (unfold_index / unfold_sign (2, 15), ``operators.unfold_gather``, for
-    the rows; their constants for the columns). Each spectrum row goes through its column-side transform as it
-    is made, so the spectrum is never stored whole."""
+                   lpf_corr: ti.template(), corr: ti.template(), out: ti.i32):
+    """corr[out] (15 x 15, flat): the phase correlation of one pair = sum_q U_{q>>1} D_{q>>1} X_q D_{q&1}^T
+    U_{q&1}^T, X the spectrum (``spectrum_row``), D the 8-point DCT-II-e / DST-II-e (x 1/2) on both sides, U the
+    unfold as a signed gather (``operators.unfold_gather``). Rows are vectors throughout: each spectrum row goes
+    through its column-side transform (a sum of constant columns of D) and straight into the row-side sums
+    (constant multiples of that row), so neither the spectrum nor the column-side result is stored."""
     has_rb = 0
     if colours == 3:
         for u in range(used.shape[0]):
             if used[u] < 2:
                 has_rb = 1
-    p = ti.Matrix.zero(ti.f32, 2 * N, 2 * N)  # P_q = X_q D_{q&1}^T (column side): p[8 (q >> 1) + ky, 8 (q & 1) + m]
+    # y[q][m]: row m of Y_q = D_{q>>1} X_q D_{q&1}^T, a vector over the column-side frequency
+    y = [[ti.Vector.zero(ti.f32, N) for _ in ti.static(range(N))] for _ in ti.static(range(4))]
     for ky in range(N):
         x = spectrum_row(src, base_a, base_b, used, positions, weights, has_rb, fat_zero, lpf_rb, lpf_corr, ky)
-        for vs in ti.static(range(2)):
-            acc = ti.Vector.zero(ti.f32, 2 * N)  # in registers: one store per element of p
+        # column ky of the row-side matrices (vertical cos, sin), picked from the constants (ky is a loop
+        # variable: unrolling this loop made the kernel compile 4x longer for 5 % speed)
+        column = [dtt2e_column(vs, 0) for vs in ti.static(range(2))]
+        for k in ti.static(range(1, N)):
+            if ky == k:
+                for vs in ti.static(range(2)):
+                    column[vs] = dtt2e_column(vs, k)
+        for q in ti.static(range(4)):
+            row = ti.Vector.zero(ti.f32, N)  # row ky of X_q D_{q&1}^T
+            for kx in ti.static(range(N)):
+                row += x[q, kx] * dtt2e_column(q & 1, kx)
+            for m in ti.static(range(N)):
+                y[q][m] += column[q >> 1][m] * row
+    # The rows' unfold (cosine part + signed sine part), then each row's columns gathered the same way.
+    for r in ti.static(range(CORR_SIDE)):
+        half = [y[hs][ti.static(UNFOLD_INDEX[0][r])] for hs in ti.static(range(2))]
+        if ti.static(UNFOLD_SIGN[1][r] != 0.0):  # the sine part is 0 at lag 0
             for hs in ti.static(range(2)):
-                for k in ti.static(range(HALF)):
-                    even = x[2 * vs + hs, k] + x[2 * vs + hs, N - 1 - k]
-                    odd = x[2 * vs + hs, k] - x[2 * vs + hs, N - 1 - k]
-                    for m in ti.static(range(0, N, 2)):
-                        acc[N * hs + m] += ti.static(HALF_DTT2E[hs][m][k]) * even
-                        acc[N * hs + m + 1] += ti.static(HALF_DTT2E[hs][m + 1][k]) * odd
-            for j in ti.static(range(2 * N)):
-                p[N * vs + ky, j] = acc[j]
-    y = ti.Matrix.zero(ti.f32, 2 * N, 2 * N)  # Y_q = D_{q>>1} P_q (row side): y[8 (q >> 1) + m, col]
-    for col in range(2 * N):
-        acc = ti.Vector.zero(ti.f32, 2 * N)
-        for vs in ti.static(range(2)):
-            for k in ti.static(range(HALF)):
-                even = p[N * vs + k, col] + p[N * vs + N - 1 - k, col]
-                odd = p[N * vs + k, col] - p[N * vs + N - 1 - k, col]
-                for m in ti.static(range(0, N, 2)):
-                    acc[N * vs + m] += ti.static(HALF_DTT2E[vs][m][k]) * even
-                    acc[N * vs + m + 1] += ti.static(HALF_DTT2E[vs][m + 1][k]) * odd
-        for j in ti.static(range(2 * N)):
-            y[j, col] = acc[j]
-    # The column unfold first (per row of Y: cosine part + signed sine part, 15 columns), then the rows gather.
-    a = ti.Matrix.zero(ti.f32, 2 * N, CORR_SIDE)
-    for row in range(2 * N):
+                half[hs] += ti.static(UNFOLD_SIGN[1][r]) * y[2 + hs][ti.static(UNFOLD_INDEX[1][r])]
+        first = (out * CORR_SIDE + r) * CORR_SIDE
         for c in ti.static(range(CORR_SIDE)):
-            a[row, c] = y[row, ti.static(lag_col(0, c))]
-            if ti.static(lag_sign(1, 0, c) != 0.0):  # the sine part is 0 at lag 0
-                a[row, c] += ti.static(lag_sign(1, 0, c)) * y[row, ti.static(lag_col(1, c))]
-    for r in range(CORR_SIDE):
-        row_c = unfold_index[0, r]
-        row_s = N + unfold_index[1, r]
-        sign_r = unfold_sign[1, r]  # the cosine parts' signs are +1
-        for c in ti.static(range(CORR_SIDE)):
-            corr[out, r, c] = a[row_c, c] + sign_r * a[row_s, c]
+            value = half[0][ti.static(UNFOLD_INDEX[0][c])]
+            if ti.static(UNFOLD_SIGN[1][c] != 0.0):
+                value += ti.static(UNFOLD_SIGN[1][c]) * half[1][ti.static(UNFOLD_INDEX[1][c])]
+            corr[first + c] = value
 
 
 @ti.func
 def zero_correlations(corr: ti.template(), first: ti.i32, count: ti.i32):
-    for i in range(first, first + count):
-        for r in range(CORR_SIDE):
-            for c in range(CORR_SIDE):
-                corr[i, r, c] = 0.0
+    for i in range(first * CORR_SIDE * CORR_SIDE, (first + count) * CORR_SIDE * CORR_SIDE):
+        corr[i] = 0.0
 
 
 @ti.kernel
@@ -190,13 +169,12 @@ def correlate_tiles(
     fat_zero: ti.f32,
     lpf_rb: V8_1D,
     lpf_corr: V8_1D,
-    unfold_index: I32_2D,
-    unfold_sign: F32_2D,
-    corr: F32_3D,
+    corr: F32_1D,
 ):
     """One thread per (tile, pair); arguments as kernels/correlate.correlate_tiles except the colours: used
-    (U,) the colours of non-zero weight, weights (U,) theirs; the inverse transform: the 8-point matrices as
-    compile-time constants and unfold_index / unfold_sign (2, 15) (``operators.unfold_gather``). corr out: (tiles * P, 15, 15), zero for tiles whose CLT is not finite."""
+    (U,) the colours of non-zero weight, weights (U,) theirs; the inverse transform and the lag unfold are
+    compile-time constants (``operators.half_dtt2e``, ``operators.unfold_gather``). corr out: (tiles * P, 15,
+    15) flat, zero for tiles whose CLT is not finite."""
     npairs = pairs.shape[0]
     for tile, p in ti.ndrange(finite.shape[0], npairs):
         out = tile * npairs + p
@@ -205,50 +183,44 @@ def correlate_tiles(
         else:
             base_a = (tile * cams + pairs[p, 0]) * colours * 4
             base_b = (tile * cams + pairs[p, 1]) * colours * 4
-            correlate_pair(clt, base_a, base_b, used, used, weights, colours, fat_zero, lpf_rb, lpf_corr, unfold_index,
-                           unfold_sign, corr, out)
+            correlate_pair(clt, base_a, base_b, used, used, weights, colours, fat_zero, lpf_rb, lpf_corr, corr, out)
 
 
 @ti.func
-def combine(a: ti.f32, b: ti.f32, offset: ti.f32) -> ti.f32:
-    """sqrt((a + o)(b + o)) - o where both are positive, else 0; o < 0: the plain mean (network.md §1)."""
-    out = 0.0
-    if offset < 0.0:
-        out = 0.5 * (a + b)
-    elif a > 0.0 and b > 0.0:
-        out = ti.sqrt((a + offset) * (b + offset)) - offset
+def combine(a: ti.template(), b: ti.template(), offset: ti.f32):
+    """Per lane: sqrt((a + o)(b + o)) - o where both are positive, else 0; o < 0: the plain mean (network.md §1)."""
+    out = 0.5 * (a + b)
+    if offset >= 0.0:
+        both = (a > 0.0) & (b > 0.0)
+        out = ti.select(both, ti.sqrt(ti.max((a + offset) * (b + offset), 0.0)) - offset, 0.0)
     return out
 
 
 @ti.func
-def layer_value(corr: ti.template(), tile: ti.i32, layer: ti.i32, row: ti.i32, col: ti.i32, offset: ti.f32):
-    """Element (row, col) of network layer ``layer`` of ``tile``: the 9x9 centre crop of [combine(pair 0,
-    pair 1), combine(pair 2, pair 3), pair 4, pair 5] of the quad's pairs in the spec's order."""
-    y = row + NET_CROP
-    x = col + NET_CROP
-    base = tile * 6
-    value = 0.0
-    if layer == 0:
-        value = combine(corr[base + 0, y, x], corr[base + 1, y, x], offset)
-    elif layer == 1:
-        value = combine(corr[base + 2, y, x], corr[base + 3, y, x], offset)
-    else:
-        value = corr[base + layer + 2, y, x]
-    return value
+def crop(corr: ti.template(), pair: ti.i32, row: ti.i32):
+    """The centre NET_SIDE lags of row ``row`` of the (flat) correlation ``pair``, as a vector."""
+    first = (pair * CORR_SIDE + row + NET_CROP) * CORR_SIDE + NET_CROP
+    return ti.Vector([corr[first + c] for c in ti.static(range(NET_SIDE))])
 
 
 @ti.func
 def tile_layers(corr: ti.template(), tile: ti.i32, offset: ti.f32, layers: ti.template()):
-    """layers[tile] (4, 9, 9) from the tile's 6 correlations."""
-    for layer in range(NET_LAYERS):
-        for row in range(NET_SIDE):
-            for col in range(NET_SIDE):
-                layers[tile, layer, row, col] = layer_value(corr, tile, layer, row, col, offset)
+    """layers[tile] (4, 9, 9), flat: the centre crops of [combine(pair 0, pair 1), combine(pair 2, pair 3),
+    pair 4, pair 5] of the tile's 6 correlations (the quad's pairs in the spec's order), a row at a time."""
+    base = tile * 6
+    for row in range(NET_SIDE):
+        rows = [combine(crop(corr, base + 0, row), crop(corr, base + 1, row), offset),
+                combine(crop(corr, base + 2, row), crop(corr, base + 3, row), offset),
+                crop(corr, base + 4, row), crop(corr, base + 5, row)]
+        for layer in ti.static(range(NET_LAYERS)):
+            first = ((tile * NET_LAYERS + layer) * NET_SIDE + row) * NET_SIDE
+            for c in ti.static(range(NET_SIDE)):
+                layers[first + c] = rows[layer][c]
 
 
 @ti.kernel
-def network_layers(corr: F32_3D, offset: ti.f32, layers: F32_4D):
-    """corr: (tiles * 6, 15, 15) quad pairs in the spec's order; layers out: (tiles, 4, 9, 9) centre crops of
-    [combine(pair 0, pair 1), combine(pair 2, pair 3), pair 4, pair 5]."""
-    for tile, layer, row, col in layers:
-        layers[tile, layer, row, col] = layer_value(corr, tile, layer, row, col, offset)
+def network_layers(corr: F32_1D, offset: ti.f32, layers: F32_1D):
+    """corr: (tiles * 6, 15, 15) quad pairs in the spec's order; layers out: (tiles, 4, 9, 9) (``tile_layers``);
+    both flat."""
+    for tile in range(layers.shape[0] // (NET_LAYERS * NET_SIDE * NET_SIDE)):
+        tile_layers(corr, tile, offset, layers)

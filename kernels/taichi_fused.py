@@ -20,16 +20,15 @@ from tpnet_gpu.kernels.taichi_convert import (
     axis_basis, camera_window, forward_colour, kernel_base, store_clt, window_flags,
 )
 from tpnet_gpu.kernels.taichi_correlate import correlate_pair, tile_layers, zero_correlations
-from tpnet_gpu.kernels.taichi_types import F32_1D, F32_2D, F32_3D, F32_4D, I32_1D, I32_2D, U8_1D, V8_1D, V8_2D
+from tpnet_gpu.kernels.taichi_types import F32_1D, F32_3D, I32_1D, I32_2D, U8_1D, V8_1D, V8_2D
 from tpnet_gpu.layout import NET_LAYERS, NET_SIDE
 
 
 @ti.func
 def clear_layers(tile: ti.i32, layers: ti.template()):
-    for layer in range(NET_LAYERS):
-        for row in range(NET_SIDE):
-            for col in range(NET_SIDE):
-                layers[tile, layer, row, col] = 0.0
+    size = NET_LAYERS * NET_SIDE * NET_SIDE
+    for i in range(tile * size, (tile + 1) * size):
+        layers[i] = 0.0
 
 
 @ti.func
@@ -60,15 +59,13 @@ def fused_tiles(
     fat_zero: ti.f32,
     lpf_rb: V8_1D,
     lpf_corr: V8_1D,
-    unfold_index: I32_2D,
-    unfold_sign: F32_2D,
     net_offset: ti.f32,
     with_layers: ti.template(),
     tasks: I32_1D,
     count: I32_1D,
     scratch: V8_2D,
-    corr: F32_3D,
-    layers: F32_4D,
+    corr: F32_1D,
+    layers: F32_1D,
     finite: U8_1D,
     valid: U8_1D,
     written: U8_1D,
@@ -129,7 +126,7 @@ def fused_tiles(
                     base_a = slot * block + pairs[p, 0] * n_used * 4
                     base_b = slot * block + pairs[p, 1] * n_used * 4
                     correlate_pair(scratch, base_a, base_b, used, positions, weights, colours, fat_zero, lpf_rb,
-                                   lpf_corr, unfold_index, unfold_sign, corr, tile * npairs + p)
+                                   lpf_corr, corr, tile * npairs + p)
                 if ti.static(with_layers):
                     tile_layers(corr, tile, net_offset, layers)
             i += slots

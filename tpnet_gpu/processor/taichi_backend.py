@@ -41,12 +41,21 @@ class TaichiBackend:
         slots = min(geo.tiles, CUDA_FUSED_SLOTS) if self.cuda else CPU_FUSED_SLOTS_PER_THREAD * taichi_setup.threads()
         buffers.allocate_fused(slots)
         # The fused kernel's layers argument when there are no layers (not written: with_layers is False).
-        self.no_layers = torch.zeros((1, NET_LAYERS, NET_SIDE, NET_SIDE), device=buffers.torch_device)
+        self.no_layers = torch.zeros(NET_LAYERS * NET_SIDE * NET_SIDE, device=buffers.torch_device)
 
     def _v(self, array) -> torch.Tensor:
         view = self.t.get(id(array))
         if view is None:
             view = self.t[id(array)] = self.b.torch(array)
+        return view
+
+    def _flat(self, array) -> torch.Tensor:
+        """``array`` as one flat run (the correlations and layers: rows of 15 and 9 lags, stored one value at a
+        time), made once."""
+        key = ("flat", id(array))
+        view = self.t.get(key)
+        if view is None:
+            view = self.t[key] = self._v(array).view(-1)
         return view
 
     def _runs(self, array) -> torch.Tensor:
@@ -103,9 +112,9 @@ class TaichiBackend:
             v(b.padded), v(b.centres), v(b.active if masked else b.all_active), v(b.masks), v(b.kernels),
             b.kernel_grid[0], b.kernel_grid[1], int(b.use_kernels), geo.height, geo.width, geo.colours,
             v(b.used_colours), v(b.used_positions), v(b.used_weights), v(b.pairs), cfg.fat_zero, v(b.lpf_rb),
-            v(b.lpf_corr), v(b.unfold_index), v(b.unfold_sign), cfg.net_offset, layers, v(b.tasks),
-            v(b.count), v(b.scratch), v(b.corr),
-            v(b.layers) if layers else self.no_layers, v(b.finite), v(b.valid), v(b.written),
+            v(b.lpf_corr), cfg.net_offset, layers, v(b.tasks),
+            v(b.count), v(b.scratch), self._flat(b.corr),
+            self._flat(b.layers) if layers else self.no_layers, v(b.finite), v(b.valid), v(b.written),
             v(b.layers_written),
         )
 
@@ -113,7 +122,7 @@ class TaichiBackend:
         b, geo, cfg, v = self.b, self.geo, self.config, self._v
         taichi_correlate.correlate_tiles(
             v(b.clt), v(b.finite), v(b.pairs), geo.cams, geo.colours, v(b.used_colours), v(b.used_weights),
-            cfg.fat_zero, v(b.lpf_rb), v(b.lpf_corr), v(b.unfold_index), v(b.unfold_sign), v(b.corr),
+            cfg.fat_zero, v(b.lpf_rb), v(b.lpf_corr), self._flat(b.corr),
         )
         v(b.written).fill_(1)  # every tile's correlations were written, zero where not finite
 
@@ -121,7 +130,7 @@ class TaichiBackend:
         """The network layers of every tile from its correlations (quad pairs; else none to make)."""
         b, v = self.b, self._v
         if b.layers is not None:
-            taichi_correlate.network_layers(v(b.corr), self.config.net_offset, v(b.layers))
+            taichi_correlate.network_layers(self._flat(b.corr), self.config.net_offset, self._flat(b.layers))
             v(b.layers_written).fill_(1)
 
     def _convert_texture(self, masked: bool) -> None:
