@@ -43,24 +43,33 @@ ROW16_1D = ti.types.ndarray(dtype=ti.types.vector(SIDE, ti.f32), ndim=1)
 
 
 @ti.func
+def inverse_column(sine: ti.template(), k: ti.template()):
+    """Column k of the inverse operator (cosine 0, sine 1) as a constant vector over the 16 pixels."""
+    return ti.Vector([ti.static(INVERSE[sine][c][k]) for c in ti.static(range(SIDE))])
+
+
+@ti.func
 def compress_row(v, scale_shot: ti.f32, min_shot: ti.f32, linear: ti.f32):
-    """``compress`` of each of a row's 16 values."""
-    out = ti.Vector.zero(ti.f32, SIDE)
-    for c in ti.static(range(SIDE)):
-        out[c] = compress(v[c], scale_shot, min_shot, linear)
-    return out
+    """``compress`` of each of a row's 16 values, as lanes (the root is taken of every lane, kept where v > min_shot)."""
+    return ti.select(v > min_shot, scale_shot * ti.sqrt(ti.max(v, min_shot)), linear * v)
 
 
 @ti.func
 def demosaic_row(above, mid, below, centre: ti.f32, corner: ti.f32):
     """Filtered interior row of M / W2 (16,): centre x mid + 1/8 x the 4 edge neighbours + corner x the 4
-    diagonal ones (R, B: 1/4, 1/16; G: 1/2, 0); columns 0 and 15 stay unfiltered."""
-    out = mid
-    for c in ti.static(range(1, SIDE - 1)):
-        edge = above[c] + below[c] + mid[c - 1] + mid[c + 1]
-        diagonal = above[c - 1] + above[c + 1] + below[c - 1] + below[c + 1]
-        out[c] = centre * mid[c] + 0.125 * edge + corner * diagonal
-    return out
+    diagonal ones (R, B: 1/4, 1/16; G: 1/2, 0); columns 0 and 15 stay unfiltered. Rows as vectors: the left and
+    right neighbours are the rows shifted by one lane."""
+    vertical = above + below
+    edge = vertical + shift(mid, 1) + shift(mid, -1)
+    diagonal = shift(vertical, 1) + shift(vertical, -1)
+    out = centre * mid + 0.125 * edge + corner * diagonal
+    return ti.Vector([out[c] if ti.static(0 < c < SIDE - 1) else mid[c] for c in ti.static(range(SIDE))])
+
+
+@ti.func
+def shift(row, by: ti.template()):
+    """row[c + by] at lane c (lanes past either end repeat the edge; the filter leaves them unused)."""
+    return ti.Vector([row[ti.static(min(max(c + by, 0), SIDE - 1))] for c in ti.static(range(SIDE))])
 
 
 @ti.kernel
@@ -87,8 +96,9 @@ def texture_imclt(
         if finite[tile] != 0:
             base = ((tile * cams + cam) * colours + colour) * 4
             # Column side first: U_q = (L X_q) G_{q&1}^T, (8, 16) each; then T = G_c (U_0 + U_1) + G_s (U_2 + U_3).
-            u_cos = ti.Matrix.zero(ti.f32, N, SIDE)  # vertical cosine rows: U_0 + U_1
-            u_sin = ti.Matrix.zero(ti.f32, N, SIDE)  # vertical sine rows: U_2 + U_3
+            # Rows as vectors: row ky of U is a sum of the operators' constant columns times the CLT row's values.
+            u_cos = [ti.Vector.zero(ti.f32, SIDE) for _ in ti.static(range(N))]  # vertical cosine rows: U_0 + U_1
+            u_sin = [ti.Vector.zero(ti.f32, SIDE) for _ in ti.static(range(N))]  # vertical sine rows: U_2 + U_3
             for ky in ti.static(range(N)):
                 low = lpf[colour, ky]
                 r0 = clt[base + 0, ky] * low
@@ -96,15 +106,10 @@ def texture_imclt(
                 r2 = clt[base + 2, ky] * low
                 r3 = clt[base + 3, ky] * low
                 for kx in ti.static(range(N)):
-                    x0 = r0[kx]
-                    x1 = r1[kx]
-                    x2 = r2[kx]
-                    x3 = r3[kx]
-                    for c in ti.static(range(SIDE)):
-                        gc = ti.static(INVERSE[0][c][kx])
-                        gs = ti.static(INVERSE[1][c][kx])
-                        u_cos[ky, c] += x0 * gc + x1 * gs
-                        u_sin[ky, c] += x2 * gc + x3 * gs
+                    gc = inverse_column(0, kx)
+                    gs = inverse_column(1, kx)
+                    u_cos[ky] += r0[kx] * gc + r1[kx] * gs
+                    u_sin[ky] += r2[kx] * gc + r3[kx] * gs
             out = (tile * cams + cam) * colours + colour
             # The 3x3 filter of row r - 1 runs once row r exists: three rows of T / W2 live at a time.
             centre, corner = 0.25, 0.0625  # R, B
@@ -115,10 +120,7 @@ def texture_imclt(
             for r in range(SIDE):
                 row = ti.Vector.zero(ti.f32, SIDE)
                 for ky in ti.static(range(N)):
-                    gc = inv_cos[r, ky]
-                    gs = inv_sin[r, ky]
-                    for c in ti.static(range(SIDE)):
-                        row[c] += gc * u_cos[ky, c] + gs * u_sin[ky, c]
+                    row += inv_cos[r, ky] * u_cos[ky] + inv_sin[r, ky] * u_sin[ky]
                 pix[out, r] = row
                 below = row * inv_window2[r]
                 if ti.static(colours == 1):
