@@ -139,8 +139,10 @@ def texture_imclt(
 # texture_combine: one thread per run of LANES pixels of a tile row, the run's pixels as vector lanes. Straight-line
 # lane code (selects instead of branches, exp_f32 instead of the libm call) lets the compiler turn each step into
 # 4-wide vector instructions: the camera weights' ten exponentials per pixel were most of the combine's time
-# (measured: 4 lanes -25 %; 2 lanes gain nothing; 8 and 16 spill registers and compile for much longer).
-LANES = 4
+# (measured: 4 lanes -25 %; 2 lanes gain nothing). With Taichi's matrices kept as LLVM vectors (taichi_setup.py),
+# 8 lanes take 0.66x the time of 4 (5 MPix combine 0.53 -> 0.35 s); 16 lanes crash (rows of 64 bytes at 32-byte
+# offsets: the vector loads assume alignment).
+LANES = 8
 RUNS = ti.types.ndarray(dtype=ti.types.vector(LANES, ti.f32), ndim=3)  # (n, 16, 16 / LANES) runs of pixels
 RUNS_2D = ti.types.ndarray(dtype=ti.types.vector(LANES, ti.f32), ndim=2)  # (16, 16 / LANES)
 # exp_f32: e^x = 2^n e^r, n = round(x / ln 2), r = x - n ln 2, e^r by a degree-7 polynomial on |r| <= ln 2 / 2

@@ -290,3 +290,17 @@ def test_texture_after_a_fused_measure_converts_first(backend, frames):
     tp.measure(0.0)
     tp.texture()
     assert (tp.result.texture - want).abs().max() > 1e-3  # the targets' own texture, not a stale one
+
+
+def test_taichi_rejects_buffers_with_unaligned_rows():
+    """Taichi's vector loads assume rows of 8 or 16 floats aligned on their size (an unaligned one faults): the
+    backend checks each array once, by address. Oracle: the address arithmetic of a view 4 bytes into its storage.
+    Checked to fail: without the check the view is taken and no error is raised."""
+    import warp as wp
+
+    tp = TileProcessor(H, W, device="cpu", backend="taichi")
+    storage = torch.zeros(4 * 8 + 16)
+    aligned = wp.from_torch(storage[: 4 * 8].view(4, 8))
+    assert tp._backend._v(aligned).data_ptr() == storage.data_ptr()
+    with pytest.raises(RuntimeError, match="not aligned on its rows of 32 bytes"):
+        tp._backend._v(wp.from_torch(storage[1 : 1 + 4 * 8].view(4, 8)))

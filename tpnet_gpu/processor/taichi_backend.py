@@ -47,6 +47,13 @@ class TaichiBackend:
         view = self.t.get(id(array))
         if view is None:
             view = self.t[id(array)] = self.b.torch(array)
+            # The kernels read rows of 8 or 16 floats as vectors, and Taichi's vector loads assume rows aligned
+            # on their size (an unaligned one faults). Warp and torch allocate on 64 bytes and the band views
+            # start on whole tiles; checked once per array.
+            row_bytes = view.shape[-1] * view.element_size() if view.dim() and view.shape[-1] in (8, 16) else 1
+            if view.data_ptr() % row_bytes:
+                raise RuntimeError(f"Taichi backend: a buffer {tuple(view.shape)} at {view.data_ptr():#x} is not "
+                                   f"aligned on its rows of {row_bytes} bytes")
         return view
 
     def _flat(self, array) -> torch.Tensor:
