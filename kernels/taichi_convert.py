@@ -29,6 +29,9 @@ from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
 
 _WINDOW_PARTS, _PHASE_PARTS = operators.shifted_basis_parts()
 WINDOW_PARTS, PHASE_PARTS = _WINDOW_PARTS.tolist(), _PHASE_PARTS.tolist()  # compile-time constants
+# [part][n][j]: a basis row is [cos | sin](phi + a) = ROW_PARTS[0][n] * [cos a | cos a] + ROW_PARTS[1][n] * [sin a | sin a]
+ROW_PARTS = [[PHASE_PARTS[0][k][n] for k in range(N)] + [PHASE_PARTS[1][k][n] for k in range(N)] for n in range(WINDOW)], \
+    [[-PHASE_PARTS[1][k][n] for k in range(N)] + [PHASE_PARTS[0][k][n] for k in range(N)] for n in range(WINDOW)]
 
 # Where one camera's window lies: padded-frame corner, residual shifts, Bayer parity, kernel-grid node, flags.
 CameraWindow = ti.types.struct(oy=ti.i32, ox=ti.i32, sx=ti.f32, sy=ti.f32, parity=ti.i32, kny=ti.i32, knx=ti.i32,
@@ -80,7 +83,8 @@ def camera_window(centres: ti.template(), tile: ti.i32, cam: ti.i32, image_heigh
 @ti.func
 def axis_basis(s: ti.f32):
     """(16, 16) [n, j]: 1/2 w(n + s) cos(omega_k (n + s + 4.5)) for j = k < 8, the sine for j = 8 + k, by angle
-    addition from the shift-free parts of ``operators.shifted_basis_parts`` (compile-time constants)."""
+    addition from the shift-free parts of ``operators.shifted_basis_parts`` (compile-time constants), a row at a
+    time (``basis_row``)."""
     theta = ti.math.pi * s / 16.0
     c1 = ti.cos(theta)
     s1 = ti.sin(theta)
@@ -93,15 +97,18 @@ def axis_basis(s: ti.f32):
     for k in ti.static(range(1, N)):
         ck[k] = ck[k - 1] * c2 - sk[k - 1] * s2
         sk[k] = sk[k - 1] * c2 + ck[k - 1] * s2
-    basis = ti.Matrix.zero(ti.f32, WINDOW, WINDOW)
-    for n in ti.static(range(WINDOW)):
-        half_w = 0.5 * (ti.static(WINDOW_PARTS[0][n]) * c1 + ti.static(WINDOW_PARTS[1][n]) * s1)
-        for k in ti.static(range(N)):
-            cos_phi = ti.static(PHASE_PARTS[0][k][n])
-            sin_phi = ti.static(PHASE_PARTS[1][k][n])
-            basis[n, k] = half_w * (cos_phi * ck[k] - sin_phi * sk[k])
-            basis[n, N + k] = half_w * (sin_phi * ck[k] + cos_phi * sk[k])
-    return basis
+    cos2 = ti.Vector([ck[j % N] for j in ti.static(range(WINDOW))])  # [cos | cos] of (2k + 1) theta
+    sin2 = ti.Vector([sk[j % N] for j in ti.static(range(WINDOW))])
+    return ti.Matrix.rows([basis_row(n, c1, s1, cos2, sin2) for n in ti.static(range(WINDOW))])
+
+
+@ti.func
+def basis_row(n: ti.template(), c1: ti.f32, s1: ti.f32, cos2: ti.template(), sin2: ti.template()):
+    """Row n of ``axis_basis``: the shifted window's value times [cos | sin](phi_k(n) + (2k + 1) theta)."""
+    half_w = 0.5 * (ti.static(WINDOW_PARTS[0][n]) * c1 + ti.static(WINDOW_PARTS[1][n]) * s1)
+    cos_part = ti.Vector([ti.static(ROW_PARTS[0][n][j]) for j in ti.static(range(WINDOW))])
+    sin_part = ti.Vector([ti.static(ROW_PARTS[1][n][j]) for j in ti.static(range(WINDOW))])
+    return half_w * (cos_part * cos2 + sin_part * sin2)
 
 
 @ti.func

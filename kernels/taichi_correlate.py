@@ -93,9 +93,13 @@ def spectrum_row(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.te
     # scalar form only where the unscaled squares could under- or overflow, NaN, or 0.
     energy = fat_zero * fat_zero + x0 * x0 + x1 * x1 + x2 * x2 + x3 * x3
     inv = 1.0 / ti.sqrt(energy)
-    for kx in ti.static(range(N)):
-        if not (energy[kx] >= 1e-30 and energy[kx] <= 1e37):
-            inv[kx] = inverse_norm(x0[kx], x1[kx], x2[kx], x3[kx], fat_zero)
+    # 1 / 0 per lane, 0 for NaN (as integers: Taichi 1.7 misreads single lanes, any() and all() of a comparison's
+    # vector when matrices are LLVM vectors; selects of it are right)
+    usual = ti.select((energy >= 1e-30) & (energy <= 1e37), 1, 0)
+    if usual.min() == 0:  # one test per row in the usual case
+        for kx in ti.static(range(N)):
+            if usual[kx] == 0:
+                inv[kx] = inverse_norm(x0[kx], x1[kx], x2[kx], x3[kx], fat_zero)
     scale = inv * lpf_corr[ky]
     return ti.Matrix.rows([x0 * scale, x1 * scale, x2 * scale, x3 * scale])
 
