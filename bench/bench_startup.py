@@ -68,10 +68,12 @@ def timed_child(command: list[str], env: dict) -> tuple[float, float, str]:
     return seconds, cpu, done.stdout
 
 
-def process_once(scene: Path, out: Path, backend: str, root: Path) -> dict:
-    """One ``tpnet process`` in a fresh process over the caches under ``root``: wall and reported seconds, and
-    the kernels it added to the caches."""
+def process_once(scene: Path, tmp: Path, backend: str, root: Path) -> dict:
+    """One ``tpnet process`` in a fresh process over the caches under ``root``, into a new output folder under
+    ``tmp`` (the command refuses one that holds files): wall and reported seconds, and the kernels it added to
+    the caches."""
     before = cache_entries(root)
+    out = Path(tempfile.mkdtemp(prefix="out-", dir=tmp))
     command = [sys.executable, "-m", "tpnet_gpu.cli", "process", str(scene), "--out", str(out), "--device", "cpu",
                "--no-figures", *([] if backend == "default" else ["--backend", backend])]  # start-up, not plots
     wall, cpu, stdout = timed_child(command, cache_env(root))
@@ -123,9 +125,9 @@ def main(argv=None) -> dict:
                 root = Path(args.cache) if args.cache else tmp / f"cache-{width}x{height}-{backend}"
                 rows = {}
                 if not args.cache:
-                    rows["cold"] = _row([process_once(scene, tmp / "out", backend, root)])
+                    rows["cold"] = _row([process_once(scene, tmp, backend, root)])
                     log(f"{width}x{height} {backend} cold: {rows['cold']['wall_s']['median']:.2f} s")
-                warm = [process_once(scene, tmp / "out", backend, root) for _ in range(args.repeat)]
+                warm = [process_once(scene, tmp, backend, root) for _ in range(args.repeat)]
                 rows["warm"] = _row(warm)
                 log(f"{width}x{height} {backend} warm: median {rows['warm']['wall_s']['median']:.2f} s")
                 entry["backends"][backend] = rows

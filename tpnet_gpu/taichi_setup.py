@@ -139,7 +139,7 @@ def init_taichi(arch: str = "cpu", threads: int | None = None) -> None:
                 log_level=ti.WARN,
                 default_fp=ti.f32,
                 default_ip=ti.i32,
-                # matrices stay LLVM vectors: packed SIMD code, and a cold compile ~5x faster (platform.md)
+                # matrices stay LLVM vectors: packed SIMD code, a cold compile ~5x faster (docs/platform.md §2)
                 real_matrix_scalarize=False,
                 debug=_debug(),
             )
