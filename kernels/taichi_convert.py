@@ -29,9 +29,12 @@ from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
 
 _WINDOW_PARTS, _PHASE_PARTS = operators.shifted_basis_parts()
 WINDOW_PARTS, PHASE_PARTS = _WINDOW_PARTS.tolist(), _PHASE_PARTS.tolist()  # compile-time constants
-# [part][n][j]: a basis row is [cos | sin](phi + a) = ROW_PARTS[0][n] * [cos a | cos a] + ROW_PARTS[1][n] * [sin a | sin a]
-ROW_PARTS = [[PHASE_PARTS[0][k][n] for k in range(N)] + [PHASE_PARTS[1][k][n] for k in range(N)] for n in range(WINDOW)], \
-    [[-PHASE_PARTS[1][k][n] for k in range(N)] + [PHASE_PARTS[0][k][n] for k in range(N)] for n in range(WINDOW)]
+# [part][n][j], for basis_row: [cos | sin](phi_k(n) + a_k) = ROW_PARTS[0][n] [cos a | cos a]
+#                                                            + ROW_PARTS[1][n] [sin a | sin a]
+ROW_PARTS = (
+    [[PHASE_PARTS[0][k][n] for k in range(N)] + [PHASE_PARTS[1][k][n] for k in range(N)] for n in range(WINDOW)],
+    [[-PHASE_PARTS[1][k][n] for k in range(N)] + [PHASE_PARTS[0][k][n] for k in range(N)] for n in range(WINDOW)],
+)
 
 # Where one camera's window lies: padded-frame corner, residual shifts, Bayer parity, kernel-grid node, flags.
 CameraWindow = ti.types.struct(oy=ti.i32, ox=ti.i32, sx=ti.f32, sy=ti.f32, parity=ti.i32, kny=ti.i32, knx=ti.i32,

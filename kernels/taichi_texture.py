@@ -25,15 +25,6 @@ from tpnet_gpu.tables import TILE_SIZE as SIDE  # window side, pixels
 INVERSE = operators.inverse_axes().astype("float32").tolist()
 
 
-@ti.func
-def compress(v: ti.f32, scale_shot: ti.f32, min_shot: ti.f32, linear: ti.f32) -> ti.f32:
-    """Shot-noise compression: scale sqrt(v) above min_shot, the tangent line ``linear`` v below."""
-    out = linear * v
-    if v > min_shot:
-        out = scale_shot * ti.sqrt(v)
-    return out
-
-
 # texture_imclt reads and writes whole rows (CLT rows of 8, pixel rows of 16) as vectors: one vector load or store
 # each instead of 8 or 16 scalar ones the compiler then packs (measured: texture_imclt -9 %). The arrays keep their
 # (n, 8, 8) and (n, 16, 16) shapes: the last axis is the vector.
@@ -50,7 +41,8 @@ def inverse_column(sine: ti.template(), k: ti.template()):
 
 @ti.func
 def compress_row(v, scale_shot: ti.f32, min_shot: ti.f32, linear: ti.f32):
-    """``compress`` of each of a row's 16 values, as lanes (the root is taken of every lane, kept where v > min_shot)."""
+    """Shot-noise compression of a row's 16 values as lanes: scale sqrt(v) above min_shot, the tangent line
+    ``linear`` v below (the root is taken of every lane and kept where v > min_shot)."""
     return ti.select(v > min_shot, scale_shot * ti.sqrt(ti.max(v, min_shot)), linear * v)
 
 
@@ -138,7 +130,7 @@ def texture_imclt(
 
 # texture_combine: one thread per run of LANES pixels of a tile row, the run's pixels as vector lanes. Straight-line
 # lane code (selects instead of branches, exp_f32 instead of the libm call) lets the compiler turn each step into
-# 4-wide vector instructions: the camera weights' ten exponentials per pixel were most of the combine's time
+# LANES-wide vector instructions: the camera weights' ten exponentials per pixel were most of the combine's time
 # (measured: 4 lanes -25 %; 2 lanes gain nothing). With Taichi's matrices kept as LLVM vectors (taichi_setup.py),
 # 8 lanes take 0.66x the time of 4 (5 MPix combine 0.53 -> 0.35 s); 16 lanes crash (rows of 64 bytes at 32-byte
 # offsets: the vector loads assume alignment).
