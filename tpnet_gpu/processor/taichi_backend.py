@@ -40,7 +40,7 @@ class TaichiBackend:
         # Fused pass: a few slots per CPU thread (balance), one GPU thread per slot on CUDA (at most one per tile).
         slots = min(geo.tiles, CUDA_FUSED_SLOTS) if self.cuda else CPU_FUSED_SLOTS_PER_THREAD * taichi_setup.threads()
         buffers.allocate_fused(slots)
-        # The fused kernel's layers argument when there are no layers (not written: with_layers is False).
+        # The fused kernel's layers argument when there are no layers (not written: with_layers is 0).
         self.no_layers = torch.zeros(NET_LAYERS * NET_SIDE * NET_SIDE, device=buffers.torch_device)
 
     def _v(self, array) -> torch.Tensor:
@@ -119,7 +119,7 @@ class TaichiBackend:
             v(b.padded), v(b.centres), v(b.active if masked else b.all_active), v(b.masks), v(b.kernels),
             b.kernel_grid[0], b.kernel_grid[1], int(b.use_kernels), geo.height, geo.width, geo.colours,
             v(b.used_colours), v(b.used_positions), v(b.used_weights), v(b.pairs), cfg.fat_zero, v(b.lpf_rb),
-            v(b.lpf_corr), cfg.net_offset, layers, v(b.tasks),
+            v(b.lpf_corr), cfg.net_offset, int(layers), v(b.tasks),
             v(b.count), v(b.scratch), self._flat(b.corr),
             self._flat(b.layers) if layers else self.no_layers, v(b.finite), v(b.valid), v(b.written),
             v(b.layers_written),
