@@ -12,8 +12,8 @@ time) combines the quad's pairs.
 Speed (CPU): colours of zero weight are skipped (the caller passes the used colours); the 8-point transforms and
 the unfold are compile-time constants (``operators.half_dtt2e``, ``operators.unfold_gather``); rows are vectors
 (Taichi keeps them as LLVM vectors, taichi_setup.py): a transform is a sum of constant rows or columns times
-scalars, the packed instructions the CPU has (no folding of the inputs, which halves scalar multiplies but not
-vector ones).
+scalars, the packed instructions the CPU has. The row side folds its input rows (P_k +- P_{7-k}, the matrices
+being even or odd in k with the parity of m), which halves its vector products.
 
 Layouts: ``clt`` (tiles * cams * colours * 4, 8, 8); ``corr`` (tiles * pairs, 15, 15) and ``layers`` (tiles, 4, 9,
 9), both passed flat (a vector type of 15 or 9 lanes would make Taichi emit aligned vector accesses at unaligned
@@ -31,6 +31,7 @@ from tpnet_gpu.tables import DTT_SIZE as N  # frequencies per axis
 HALF_DTT2E = operators.half_dtt2e().tolist()  # [sine][m][k], compile-time constants
 _INDEX, _SIGN = operators.unfold_gather()
 UNFOLD_INDEX, UNFOLD_SIGN = _INDEX.tolist(), _SIGN.tolist()  # [sine][lag + 7]
+HALF = N // 2
 
 
 @ti.func
@@ -117,30 +118,35 @@ def correlate_pair(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.
     """corr[out] (15 x 15, flat): the phase correlation of one pair = sum_q U_{q>>1} D_{q>>1} X_q D_{q&1}^T
     U_{q&1}^T, X the spectrum (``spectrum_row``), D the 8-point DCT-II-e / DST-II-e (x 1/2) on both sides, U the
     unfold as a signed gather (``operators.unfold_gather``). Rows are vectors throughout: each spectrum row goes
-    through its column-side transform (a sum of constant columns of D) and straight into the row-side sums
-    (constant multiples of that row), so neither the spectrum nor the column-side result is stored."""
+    through its column-side transform (a sum of constant columns of D times the row's frequencies) as it is made,
+    so the spectrum is never stored; the row side sums constant multiples of the folded rows of P_q."""
     has_rb = 0
     if colours == 3:
         for u in range(used.shape[0]):
             if used[u] < 2:
                 has_rb = 1
-    # y[q][m]: row m of Y_q = D_{q>>1} X_q D_{q&1}^T, a vector over the column-side frequency
-    y = [[ti.Vector.zero(ti.f32, N) for _ in ti.static(range(N))] for _ in ti.static(range(4))]
+    # p[q][ky]: row ky of P_q = X_q D_{q&1}^T, a vector over the column-side frequency (a row-indexed matrix: ky
+    # is a loop variable; unrolling that loop made the kernel compile 4x longer for 5 % speed)
+    p = [ti.Matrix.zero(ti.f32, N, N) for _ in ti.static(range(4))]
     for ky in range(N):
         x = spectrum_row(src, base_a, base_b, used, positions, weights, has_rb, fat_zero, lpf_rb, lpf_corr, ky)
-        # column ky of the row-side matrices (vertical cos, sin), picked from the constants (ky is a loop
-        # variable: unrolling this loop made the kernel compile 4x longer for 5 % speed)
-        column = [dtt2e_column(vs, 0) for vs in ti.static(range(2))]
-        for k in ti.static(range(1, N)):
-            if ky == k:
-                for vs in ti.static(range(2)):
-                    column[vs] = dtt2e_column(vs, k)
         for q in ti.static(range(4)):
-            row = ti.Vector.zero(ti.f32, N)  # row ky of X_q D_{q&1}^T
+            row = ti.Vector.zero(ti.f32, N)
             for kx in ti.static(range(N)):
                 row += x[q, kx] * dtt2e_column(q & 1, kx)
             for m in ti.static(range(N)):
-                y[q][m] += column[q >> 1][m] * row
+                p[q][ky, m] = row[m]
+    # y[q][m]: row m of Y_q = D_{q>>1} P_q, on folded rows (the matrices are even in k <-> 7 - k for even m, odd for
+    # odd m: half the products)
+    y = [[ti.Vector.zero(ti.f32, N) for _ in ti.static(range(N))] for _ in ti.static(range(4))]
+    for q in ti.static(range(4)):
+        rows = [ti.Vector([p[q][k, m] for m in ti.static(range(N))]) for k in ti.static(range(N))]
+        for k in ti.static(range(HALF)):
+            even = rows[k] + rows[N - 1 - k]
+            odd = rows[k] - rows[N - 1 - k]
+            for m in ti.static(range(0, N, 2)):
+                y[q][m] += ti.static(HALF_DTT2E[q >> 1][m][k]) * even
+                y[q][m + 1] += ti.static(HALF_DTT2E[q >> 1][m + 1][k]) * odd
     # The rows' unfold (cosine part + signed sine part), then each row's columns gathered the same way.
     for r in ti.static(range(CORR_SIDE)):
         half = [y[hs][ti.static(UNFOLD_INDEX[0][r])] for hs in ti.static(range(2))]
