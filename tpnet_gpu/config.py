@@ -211,8 +211,9 @@ class EngineConfig:
     strength >= ``min_strength`` and |residual| <= ``trust``. ``measure``: "axis" (the pairs' combined peak, any
     rig, all on the device) or "lma" (the quad's LMA peak fit, float64 on the host); the same flat-tile precision
     on rendered tuning scenes. A rig whose pairs lie along quad pairs (a binocular rig: the quad's pair 0) takes
-    "lma" with the other quad pairs masked off (``disparity.measure.lma_slots``); other rigs always use "axis". A refined tile that ends more than
-    ``leash`` px from a first-stage answer whose margin is >= ``leash_margin`` keeps the first stage's answer."""
+    "lma" with the other quad pairs masked off (``disparity.measure.lma_slots``); other rigs always use "axis". A
+    refined tile that ends more than ``leash`` px from a first-stage answer whose margin is >= ``leash_margin``
+    keeps the first stage's answer."""
 
     d_min: float = 0.0
     d_max: float | None = None
