@@ -115,11 +115,12 @@ class RecordingEngine:
     calls = []
 
     def __init__(self, height, width, *, cfa="GRBG", rig=None, min_disparity=0.0, max_disparity=None,
-                 weights=None, device=None, backend=None):
+                 weights=None, device=None, backend=None, config=None):
         self.shape = (height, width)
         self.weights = None  # the engine's result: no network (frame_outputs.method)
         self.calls.append(dict(height=height, width=width, cfa=cfa, rig=rig, min_disparity=min_disparity,
-                               max_disparity=max_disparity, weights=weights, device=device, backend=backend))
+                               max_disparity=max_disparity, weights=weights, device=device, backend=backend,
+                               config=config))
 
     def process(self, frames):
         self.calls[-1]["frames"] = np.array(frames)
@@ -127,7 +128,7 @@ class RecordingEngine:
         h, w = self.shape
         tiles = torch.arange(h // 8 * (w // 8), dtype=torch.float32).reshape(h // 8, w // 8)
         texture = torch.arange(4 * h * w, dtype=torch.float32).reshape(4, h, w)
-        return SimpleNamespace(disparity=tiles, confidence=tiles + 0.5, texture=texture)
+        return SimpleNamespace(disparity=tiles, confidence=tiles + 0.5, texture=texture, pixels=None)
 
 
 @pytest.fixture

@@ -15,7 +15,7 @@ def test_depth_nan_where_unmeasured_and_inf_at_or_beyond_infinity():
     assert z.dtype == np.float32
     assert np.isnan(z[0, 0]) and z[0, 1] == np.inf and z[0, 2] == np.inf
     np.testing.assert_allclose(z[1], 4.5 * 258.0 / (d[1] * 0.0022) / 1000.0, rtol=1e-6)
-    with pytest.raises(ValueError, match=r"disparity: expected a tile map \(tiles_y, tiles_x\), got shape \(3,\)"):
+    with pytest.raises(ValueError, match=r"disparity: expected a map \(rows, columns\) of tiles or pixels, got shape \(3,\)"):
         pointcloud.depth(np.ones(3), Rig())
 
 

@@ -90,7 +90,9 @@ def _process(args: argparse.Namespace, step) -> int:
     with _one_shot(height, width, args.backend) as backend:
         pipeline = make_pipeline(height, width, cfa=frames.cfa, rig=inputs.rig, min_disparity=min_d,
                                  max_disparity=max_d, weights=args.weights, device=args.device, backend=backend,
-                                 two_surface=args.two_surface)
+                                 two_surface=args.two_surface, cross_check=False if args.no_checks else None,
+                                 min_confidence=args.min_confidence, keep_fraction=args.keep_fraction,
+                                 per_pixel=True if args.per_pixel else None)
         step("frame")
         result = pipeline.process(frames.frames)
     seconds = time.perf_counter() - start
@@ -100,7 +102,7 @@ def _process(args: argparse.Namespace, step) -> int:
     scene = " ".join(p.name for p in map(Path, args.inputs))
     with output_folder(out, overwrite=args.overwrite, inputs=args.inputs) as folder:
         written = frame_outputs.write(folder, maps, scene=scene, what=frame_outputs.method(pipeline),
-                                      figures=not args.no_figures)
+                                      figures=not args.no_figures, per_pixel=args.per_pixel)
         if args.two_surface:  # NaN where the tile shows one surface
             written += frame_outputs.write_surfaces(folder, result.surfaces, frames)
     step.close()  # the bar off the terminal before the report
@@ -209,7 +211,7 @@ WEIGHTS_HELP = ("TPNET weights from `tpnet train` (default: the shipped ones for
                 "rig or other colours are refused")
 NO_FIGURES_HELP = "write no labelled figures (PNG, matplotlib): faster; the TIFFs, points.ply and texture.png stay"
 BENCHES = ("tp", "accuracy", "network", "network_limits", "network_context", "throughput", "startup", "fuzz",
-           "calibration", "ray", "flow", "two_surface")
+           "calibration", "ray", "flow", "two_surface", "real")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -273,6 +275,14 @@ def build_parser() -> argparse.ArgumentParser:
     proc.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP + "; never an input's folder")
     proc.add_argument("--two-surface", action="store_true", help="also foreground.tif, background.tif and "
                       "w_foreground.tif: both disparities of tiles whose correlation shows two surfaces (NaN: one)")
+    proc.add_argument("--min-confidence", type=float, default=0.0, metavar="C",
+                      help="tiles of confidence below C (>= 0; confidence.tif) get no value (default 0: keep all)")
+    proc.add_argument("--keep-fraction", type=float, default=1.0, metavar="F",
+                      help="keep only the F (0..1] most confident answers (default 1)")
+    proc.add_argument("--no-checks", action="store_true", help="answer every tile: no cross-check of a stereo "
+                      "pair and no off-image check (docs/outputs.md §1.3)")
+    proc.add_argument("--per-pixel", action="store_true",
+                      help="also depth_px.tif and points_px.ply, one value per pixel (mono stereo pairs)")
     proc.set_defaults(func=_cmd_process)
 
     rend = sub.add_parser("render", help="render a synthetic quad-camera scene folder (DNGs + ground truth)")

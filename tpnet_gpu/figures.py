@@ -32,6 +32,7 @@ class Panel:
         cmap: matplotlib colour map name.
         low, high: the colour scale's ends (None: the 1st / 99th percentile of the finite values).
         log: a logarithmic colour scale (depth: near and far tiles both readable), when its ends are positive.
+        step: pixels per value of a float map: 8 for a tile map, 1 for a per-pixel map.
     """
 
     values: np.ndarray
@@ -42,6 +43,7 @@ class Panel:
     low: float | None = None
     high: float | None = None
     log: bool = False
+    step: int = TILE_STRIDE
 
     @property
     def is_image(self) -> bool:
@@ -54,16 +56,22 @@ def _pixels(panel: Panel, size) -> tuple[int, int]:
         return size
     if panel.is_image:
         return panel.values.shape[:2]
-    return panel.values.shape[0] * TILE_STRIDE, panel.values.shape[1] * TILE_STRIDE
+    return panel.values.shape[0] * panel.step, panel.values.shape[1] * panel.step
+
+
+def scale(panel: Panel) -> tuple[float, float]:
+    """The colour scale's ends of a float map's panel: ``low`` / ``high``, or the finite values' 1st / 99th
+    percentiles (so another panel can share them)."""
+    finite = panel.values[np.isfinite(panel.values)]
+    low = panel.low if panel.low is not None else (float(np.percentile(finite, 1)) if finite.size else 0.0)
+    high = panel.high if panel.high is not None else (float(np.percentile(finite, 99)) if finite.size else 1.0)
+    return low, (high if high > low else low + 1.0)
 
 
 def _norm(panel: Panel):
     from matplotlib import colors  # noqa: PLC0415
 
-    finite = panel.values[np.isfinite(panel.values)]
-    low = panel.low if panel.low is not None else (float(np.percentile(finite, 1)) if finite.size else 0.0)
-    high = panel.high if panel.high is not None else (float(np.percentile(finite, 99)) if finite.size else 1.0)
-    high = high if high > low else low + 1.0
+    low, high = scale(panel)
     if panel.log and low > 0:
         return colors.LogNorm(low, high), True
     return colors.Normalize(low, high), False
@@ -100,7 +108,7 @@ def _draw(fig, ax, panel: Panel, size) -> None:
     cmap = colormaps[panel.cmap].with_extremes(bad=NO_VALUE)
     norm, log = _norm(panel)
     ty, tx = values.shape
-    image = ax.imshow(values, cmap=cmap, norm=norm, extent=(0, tx * TILE_STRIDE, ty * TILE_STRIDE, 0),
+    image = ax.imshow(values, cmap=cmap, norm=norm, extent=(0, tx * panel.step, ty * panel.step, 0),
                       interpolation="nearest")
     ax.set_xlim(0, w)
     ax.set_ylim(h, 0)

@@ -9,6 +9,9 @@ Files (tile maps are ``(ceil(h / 8), ceil(w / 8))``, one value per tile, for inp
 * ``points.ply``: one point per tile of finite positive disparity, metres, rig axes (``tpnet_gpu.pointcloud``);
 * ``texture.tif`` float32 ``(channels, h, w)`` (R, G, B, alpha or Y, alpha; the frames' units), ``texture.png``
   its 8-bit picture (pixels, RGBA) and ``texture_figure.png`` that picture with axes and a title;
+* ``disparity_px.tif`` float32 ``(h, w)`` px per pixel (NaN: none) and its figure, where the pipeline made one
+  (mono frames of a stereo pair, ``PipelineConfig.per_pixel``); with ``per_pixel`` (``tpnet process --per-pixel``)
+  also ``depth_px.tif`` and ``points_px.ply`` (a point per pixel);
 * with ``tpnet process --two-surface`` (``write_surfaces``): ``foreground.tif``, ``background.tif`` float32 px and
   ``w_foreground.tif`` (the foreground's weight), NaN where the tile shows one surface.
 """
@@ -38,6 +41,7 @@ class FrameMaps:
         texture: ``(channels, h, w)`` float32 (R, G, B, alpha or Y, alpha) or None.
         rig: the rig whose virtual camera the tile grid is in (depth and points go through it).
         white: the texture level drawn as white in the 8-bit pictures and the points' colours (frames' units).
+        pixels: ``(h, w)`` float32 disparity per pixel, px, NaN where none; or None.
     """
 
     disparity: np.ndarray
@@ -45,6 +49,7 @@ class FrameMaps:
     texture: np.ndarray | None
     rig: Rig
     white: float
+    pixels: np.ndarray | None = None
 
     @property
     def size(self) -> tuple[int, int]:
@@ -61,12 +66,14 @@ def from_result(result, rig: Rig, *, frames=None, white: float | None = None) ->
         return None if t is None else t.detach().cpu().numpy().astype(np.float32)
 
     disparity, confidence, texture = host(result.disparity), host(result.confidence), host(result.texture)
+    pixels = host(result.pixels)
     if frames is not None:
         disparity, confidence = frames.crop_tiles(disparity), frames.crop_tiles(confidence)
         texture = None if texture is None else frames.crop_image(texture)
+        pixels = None if pixels is None else frames.crop_image(pixels)
     if white is None:
         white = float(np.nanpercentile(texture[:-1], 99.5)) if texture is not None else 1.0
-    return FrameMaps(disparity, confidence, texture, rig, max(white, 1e-9))
+    return FrameMaps(disparity, confidence, texture, rig, max(white, 1e-9), pixels)
 
 
 def method(pipeline) -> str:
@@ -96,9 +103,12 @@ def map_panels(maps: FrameMaps, what: str, *, low: float | None = None, high: fl
     }
 
 
-def write(folder, maps: FrameMaps, *, scene: str, what: str, figures: bool = True) -> list[str]:
-    """Write the files of the module docstring into ``folder``; ``figures`` False: no figures (no matplotlib).
-    ``scene`` and ``what`` (the method) go into the titles and the PLY header. Returns the files' names."""
+def write(folder, maps: FrameMaps, *, scene: str, what: str, figures: bool = True, per_pixel: bool = False) -> list[str]:
+    """Write the files of the module docstring into ``folder``; ``figures`` False: no figures (no matplotlib);
+    ``per_pixel``: also depth and points per pixel (``maps.pixels`` must exist). ``scene`` and ``what`` (the
+    method) go into the titles and the PLY header. Returns the files' names."""
+    if per_pixel and maps.pixels is None:
+        raise ValueError("per_pixel: these results have no per-pixel disparity (mono images of a stereo pair)")
     import tifffile  # noqa: PLC0415
 
     from tpnet_gpu.images import save_png  # noqa: PLC0415
@@ -118,6 +128,8 @@ def write(folder, maps: FrameMaps, *, scene: str, what: str, figures: bool = Tru
                                    f"{maps.white:.9g}, gamma {pointcloud.GAMMA}"))
     written.append("points.ply")
     log.info("%s: %d points of %d tiles", "points.ply", len(points), mask.size)
+    if maps.pixels is not None:
+        written += _write_pixels(folder, maps, scene=scene, what=what, per_pixel=per_pixel)
     if maps.texture is not None:
         tifffile.imwrite(folder / "texture.tif", maps.texture.astype(np.float32), photometric="minisblack")
         save_png(folder / "texture.png", texture_rgba(maps.texture, maps.white))
@@ -128,13 +140,38 @@ def write(folder, maps: FrameMaps, *, scene: str, what: str, figures: bool = Tru
     return written
 
 
+def _write_pixels(folder, maps: FrameMaps, *, scene: str, what: str, per_pixel: bool) -> list[str]:
+    """``disparity_px.tif``; with ``per_pixel`` also ``depth_px.tif`` and ``points_px.ply``."""
+    import tifffile  # noqa: PLC0415
+
+    tifffile.imwrite(folder / "disparity_px.tif", maps.pixels.astype(np.float32))
+    if not per_pixel:
+        return ["disparity_px.tif"]
+    tifffile.imwrite(folder / "depth_px.tif", pointcloud.depth(maps.pixels, maps.rig))
+    points, mask = pointcloud.pixel_points(maps.pixels, maps.rig)
+    colours = None
+    if maps.texture is not None:  # the texture's own pixel, gamma-encoded as texture.png
+        colours = texture_rgba(maps.texture, maps.white)[..., :3][mask]
+    pointcloud.write_ply(folder / "points_px.ply", points, colours,
+                         comments=(f"tpnet-gpu {scene}, {what}: one point per pixel with a disparity",
+                                   "metres; rig axes: x right, y up, z toward the viewer (points in front: z < 0)"))
+    return ["disparity_px.tif", "depth_px.tif", "points_px.ply"]
+
+
 def _figures(folder, maps: FrameMaps, *, scene: str, what: str) -> list[str]:
     from tpnet_gpu import figures  # noqa: PLC0415 - matplotlib on use
 
     written = []
-    for name, panel in map_panels(maps, what).items():
+    panels = map_panels(maps, what)
+    for name, panel in panels.items():
         figures.save(folder / f"{name}.png", panel, title=f"scene {scene}", size=maps.size)
         written.append(f"{name}.png")
+    if maps.pixels is not None:  # beside the tile map, on its colour scale
+        low, high = figures.scale(panels["disparity"])
+        panel = figures.Panel(maps.pixels, f"disparity per pixel: {what}", "disparity", "px", "turbo", low, high,
+                              step=1)
+        figures.save(folder / "disparity_px.png", panel, title=f"scene {scene}", size=maps.size)
+        written.append("disparity_px.png")
     if maps.texture is not None:
         panel = figures.Panel(texture_rgba(maps.texture, maps.white), f"texture at the final disparity: {what}")
         figures.save(folder / "texture_figure.png", panel, title=f"scene {scene}")

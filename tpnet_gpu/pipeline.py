@@ -23,8 +23,10 @@ import torch
 
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import EngineConfig, TextureConfig
+from tpnet_gpu.disparity.checks import CROSS_CHECK_PX, cross_camera, cross_difference, windows_inside
 from tpnet_gpu.disparity.engine import DisparityEngine
 from tpnet_gpu.disparity.grid import grow
+from tpnet_gpu.disparity.per_pixel import per_pixel
 from tpnet_gpu.disparity.two_surface import Surfaces, measure_surfaces
 from tpnet_gpu.net import infer
 from tpnet_gpu.net.context import context_step
@@ -40,16 +42,35 @@ class PipelineConfig:
     """``engine``: the disparity engine's settings; ``network_passes``: TPNET passes (when the pipeline has
     weights for its rig), each re-correlating at the previous one's disparity; ``textures``: make the RGBA
     texture; ``two_surface``: also fit both surfaces of tiles whose correlation shows two
-    (``FrameResult.surfaces``, tpnet_gpu/disparity/two_surface.py)."""
+    (``FrameResult.surfaces``, tpnet_gpu/disparity/two_surface.py).
+
+    Which answers come out (disparity.md §8): ``cross_check`` - the engine runs again with another camera as the
+    reference and a tile whose answers disagree by more than ``checks.CROSS_CHECK_PX``, or whose windows leave
+    an image at its answer, has no value (None: on for a two-camera rig, the stereo left-right check; it costs
+    a second engine run); then tiles of confidence below ``min_confidence`` and all but the ``keep_fraction``
+    most confident answers have none. ``per_pixel``: also a per-pixel disparity (``FrameResult.pixels``) from
+    the tile answers (``disparity/per_pixel.py``; mono frames with a camera at the reference; None: on where
+    that holds and the rig has two cameras)."""
 
     engine: EngineConfig = EngineConfig()
     network_passes: int = 1
     textures: bool = True
     two_surface: bool = False
+    cross_check: bool | None = None
+    min_confidence: float = 0.0
+    keep_fraction: float = 1.0
+    per_pixel: bool | None = None
 
     def __post_init__(self):
         if not isinstance(self.network_passes, int) or self.network_passes < 1:
             raise ValueError(f"network_passes: expected an int >= 1, got {self.network_passes!r}")
+        for name in ("cross_check", "per_pixel"):
+            if not (getattr(self, name) is None or isinstance(getattr(self, name), bool)):
+                raise ValueError(f"{name}: expected True, False or None (automatic), got {getattr(self, name)!r}")
+        if not (isinstance(self.min_confidence, (int, float)) and 0.0 <= self.min_confidence < float("inf")):
+            raise ValueError(f"min_confidence: expected a finite number >= 0, got {self.min_confidence!r}")
+        if not (isinstance(self.keep_fraction, (int, float)) and 0.0 < self.keep_fraction <= 1.0):
+            raise ValueError(f"keep_fraction: expected a number in (0, 1], got {self.keep_fraction!r}")
 
 
 @dataclass(frozen=True)
@@ -74,6 +95,10 @@ class FrameResult:
         tile_passes: tiles x cameras processed for the disparity, in full-resolution passes.
         surfaces: with ``PipelineConfig.two_surface``: ``Surfaces`` (foreground, background disparities and
             their weights, ``(tiles_y, tiles_x)`` each, NaN where the tile shows one surface), else None.
+        pixels: with ``PipelineConfig.per_pixel``: ``(H, W)`` float32 disparity per pixel of the reference
+            camera, px (NaN = none), else None.
+        checked: ``(tiles_y, tiles_x)`` bool: the tiles the checks and the confidence filters kept
+            (``PipelineConfig``); ``disparity`` is NaN elsewhere.
     """
 
     disparity: torch.Tensor
@@ -85,6 +110,8 @@ class FrameResult:
     search: torch.Tensor
     tile_passes: float
     surfaces: Surfaces | None = None
+    pixels: torch.Tensor | None = None
+    checked: torch.Tensor | None = None
 
 
 class Pipeline:
@@ -128,6 +155,7 @@ class Pipeline:
         self._scratch = torch.zeros_like(self._near)
         self.layers = NetworkLayers(self.engine.rig.offsets, tp.pairs, self.device)
         self.weights = self._weights(weights, tp.colours)
+        self._checks(height, width, cfa, pairs, engine_config, device, backend)
         if self.weights is not None:
             net_config = infer.correlation(self.weights)
             same = net_config.resolved(tp.colours) == tp.config
@@ -139,6 +167,23 @@ class Pipeline:
             self._infer = infer.infer  # an attribute, so the pipeline bench can time the network's share
         log.info("pipeline %dx%d on %s: %d cameras, disparity %g .. %g px, weights %s", width, height, self.device,
                  self.engine.rig.cams, engine_config.d_min, self.engine.d_max, self.weights)
+
+    def _checks(self, height, width, cfa, pairs, engine_config, device, backend) -> None:
+        """The cross-check's engine (``PipelineConfig.cross_check``) and the per-pixel step's cameras."""
+        cfg, rig = self.config, self.engine.rig
+        self.offsets = torch.tensor(rig.offsets_array(), dtype=torch.float32, device=self.device)
+        two = rig.cams == 2
+        self.cross_engine, self.cross_cam = None, cross_camera(self.offsets)
+        if cfg.cross_check or (cfg.cross_check is None and two):
+            self.cross_engine = DisparityEngine(height, width, rig=rig.referenced_to(self.cross_cam), pairs=pairs,
+                                                cfa=cfa, config=engine_config, device=device, backend=backend)
+        at_reference = torch.nonzero(self.offsets.norm(dim=1) < 1e-9)[:, 0]
+        possible = cfa is None and at_reference.numel() > 0
+        if cfg.per_pixel and not possible:
+            raise ValueError("per_pixel: needs mono frames (cfa None) and a rig with a camera at the reference "
+                             f"(offset (0, 0)); got cfa {cfa!r} and offsets {rig.offsets_array().tolist()}")
+        self.reference_cam = int(at_reference[0]) if at_reference.numel() else None
+        self.per_pixel = bool(cfg.per_pixel) or (cfg.per_pixel is None and possible and two)
 
     def _weights(self, weights, colours: int) -> Path | None:
         """The weights for this rig's layer lags and these frames' colours: ``weights`` if they were trained for
@@ -198,8 +243,39 @@ class Pipeline:
         if cfg.two_surface:  # its passes overwrite the engine's processor's views: keep the mask first
             valid = valid.clone()
             surfaces = measure_surfaces(self.engine, disparity)
+        pixels = None
+        if self.per_pixel:  # from every answer: a tile the checks drop can still be a right pixel's candidate
+            staging = self.engine.tp.staging  # the frames as the engine normalised them (ZNCC ignores the scale)
+            pixels, _ = per_pixel(staging[self.reference_cam], staging[self.cross_cam], disparity,
+                                  offset=self.offsets[self.cross_cam].tolist())
+        passes, keep = result.tile_passes, measured
+        if self.cross_engine is not None or cfg.min_confidence > 0 or cfg.keep_fraction < 1:
+            keep = self._keep(frames, disparity, confidence)
+            disparity = torch.where(keep, disparity, torch.full_like(disparity, float("nan")))
+            confidence = torch.where(keep, confidence, torch.zeros_like(confidence))
+            passes += self._cross_passes
         return FrameResult(disparity, confidence, result.two_depth, initial, valid, texture, result.search,
-                           result.tile_passes, surfaces)
+                           passes, surfaces, pixels, keep)
+
+    def _keep(self, frames, disparity: torch.Tensor, confidence: torch.Tensor) -> torch.Tensor:
+        """``(ty, tx)`` bool: the tiles ``PipelineConfig``'s checks and filters keep (see there); sets
+        ``self._cross_passes`` (the cross-check's tile passes, 0 without it)."""
+        cfg = self.config
+        keep = torch.isfinite(disparity)
+        self._cross_passes = 0.0
+        if self.cross_engine is not None:
+            other = self.cross_engine.run(frames)
+            self._cross_passes = other.tile_passes
+            size = (self.engine.tp.height, self.engine.tp.width)
+            keep = keep & windows_inside(disparity, self.offsets, size) & (
+                cross_difference(disparity, other.disparity, self.offsets[self.cross_cam].tolist()) <= CROSS_CHECK_PX)
+        if cfg.min_confidence > 0:
+            keep = keep & (confidence >= cfg.min_confidence)
+        if cfg.keep_fraction < 1 and bool(keep.any()):
+            values = confidence[keep]
+            floor = torch.quantile(values.double(), 1.0 - cfg.keep_fraction).to(values.dtype)
+            keep = keep & (confidence >= floor)
+        return keep
 
     def stream(self, frames: Iterable) -> Iterator[FrameResult | FrameError]:
         """Process an iterable of frames (e.g. a camera) one by one; each result is valid until the next.

@@ -22,13 +22,13 @@ GAMMA = 2.2  # texture colours to 8-bit: linear raw units / white, then this dis
 def _tile_map(values, name: str) -> np.ndarray:
     values = np.asarray(values, dtype=np.float64)
     if values.ndim != 2:
-        raise ValueError(f"{name}: expected a tile map (tiles_y, tiles_x), got shape {values.shape}")
+        raise ValueError(f"{name}: expected a map (rows, columns) of tiles or pixels, got shape {values.shape}")
     return values
 
 
 def depth(disparity, rig: Rig) -> np.ndarray:
-    """``(tiles_y, tiles_x)`` float32 depth Z, metres, of a disparity map (px): NaN where the disparity is NaN
-    (unmeasured), +inf where it is <= 0 (at or beyond infinity)."""
+    """Float32 depth Z, metres, of a disparity map (px; tiles or pixels, the same shape): NaN where the
+    disparity is NaN (unmeasured), +inf where it is <= 0 (at or beyond infinity)."""
     d = _tile_map(disparity, "disparity")
     with np.errstate(invalid="ignore"):
         z = np.where(d > 0, rig.distance(np.where(d > 0, d, 1.0)), np.inf)
@@ -71,6 +71,17 @@ def tile_points(disparity, rig: Rig) -> tuple[np.ndarray, np.ndarray]:
     with np.errstate(invalid="ignore"):
         mask = np.isfinite(d) & (d > 0)
     centres = tile_centres(d.shape)[mask]
+    return rig.image_to_world(centres, d[mask]) / 1000.0, mask
+
+
+def pixel_points(disparity, rig: Rig) -> tuple[np.ndarray, np.ndarray]:
+    """The pixels with a finite positive disparity (a per-pixel map ``(h, w)``, px) as points on the rays through
+    the pixel centres (x + 0.5, y + 0.5): ``(points (n, 3) float64 metres, mask (h, w) bool)``, row-major."""
+    d = _tile_map(disparity, "disparity")
+    with np.errstate(invalid="ignore"):
+        mask = np.isfinite(d) & (d > 0)
+    ys, xs = np.nonzero(mask)
+    centres = np.stack([xs + 0.5, ys + 0.5], axis=-1).astype(np.float64)
     return rig.image_to_world(centres, d[mask]) / 1000.0, mask
 
 

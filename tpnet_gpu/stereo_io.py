@@ -283,15 +283,16 @@ def load_inputs(paths, *, rig=None, cfa: str | None = None, colour: str = "luma"
 
 def make_pipeline(height: int, width: int, *, cfa: str | None, rig: Rig, min_disparity: float = 0.0,
                   max_disparity: float | None = None, weights=None, device: str | None = None,
-                  backend: str | None = None, two_surface: bool = False):
+                  backend: str | None = None, two_surface: bool = False, **answers):
     """The pipeline for frames of ``height`` x ``width`` from ``rig`` (any camera count; ``max_disparity`` None:
     the engine's default from the rig; ``weights`` None: the shipped ones for the rig, ``Pipeline``;
-    ``two_surface``: also both surfaces of two-surface tiles)."""
+    ``two_surface``: also both surfaces of two-surface tiles; ``answers``: ``PipelineConfig``'s
+    ``cross_check``, ``min_confidence``, ``keep_fraction``, ``per_pixel``)."""
     from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415 - torch, Warp and the model on use
 
-    extra = {"config": PipelineConfig(two_surface=True)} if two_surface else {}
+    config = PipelineConfig(two_surface=two_surface, **answers)
     return Pipeline(height, width, cfa=cfa, rig=rig, min_disparity=min_disparity, max_disparity=max_disparity,
-                    weights=weights, device=device, backend=backend, **extra)
+                    weights=weights, device=device, backend=backend, config=config)
 
 
 def load_frame(path, *, cfa: str | None = None, colour: str = "luma") -> Frames:

@@ -1,0 +1,73 @@
+"""``tpnet process`` on a stereo pair: the per-pixel files and the options that choose which answers come out.
+Oracle: a photograph moved by a known shift (exact Fourier shift, as test_cli's end-to-end pair) and the rig's
+depth formula Z = f B / (d p) for the depth file."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import tifffile
+from PIL import Image
+
+from tpnet_gpu.cli import main
+
+D = 6.4
+
+
+@pytest.fixture(scope="module")
+def photo_pair(tmp_path_factory):
+    import skimage.data
+
+    from tests.textures import fourier_shift
+
+    folder = tmp_path_factory.mktemp("pair")
+    photo = skimage.data.camera().astype(np.float64)[280:400, 150:350]
+    paths = []
+    for name, shift in (("left.png", D / 2), ("right.png", -D / 2)):
+        image = np.clip(np.round(fourier_shift(photo, shift, 0.0)), 0, 255).astype(np.uint8)
+        Image.fromarray(image).save(folder / name)
+        paths.append(str(folder / name))
+    return paths
+
+
+def test_per_pixel_files(photo_pair, tmp_path):
+    from tpnet_gpu import pointcloud, rigfile
+
+    out = tmp_path / "o"
+    assert main(["process", *photo_pair, "--max-disparity", "12", "--out", str(out), "--per-pixel"]) == 0
+    pixels = tifffile.imread(out / "disparity_px.tif")
+    assert pixels.shape == (120, 200) and pixels.dtype == np.float32
+    inner = pixels[8:-8, 20:-8]
+    assert np.isfinite(inner).mean() > 0.95 and np.nanmedian(np.abs(inner - D)) <= 0.1
+    rig = rigfile.load("binocular")
+    depth = tifffile.imread(out / "depth_px.tif")
+    finite = np.isfinite(pixels) & (pixels > 0)
+    np.testing.assert_allclose(depth[finite], rig.distance(pixels[finite].astype(np.float64)), rtol=1e-5)
+    header = (out / "points_px.ply").read_bytes()[:400].decode("ascii", "replace")
+    assert f"element vertex {int(finite.sum())}" in header
+    assert (out / "disparity_px.png").is_file()
+
+
+def test_default_has_per_pixel_disparity_only(photo_pair, tmp_path):
+    out = tmp_path / "o"
+    assert main(["process", *photo_pair, "--max-disparity", "12", "--out", str(out), "--no-figures"]) == 0
+    assert (out / "disparity_px.tif").is_file() and not (out / "depth_px.tif").exists()
+
+
+def test_keep_fraction_halves_the_answers(photo_pair, tmp_path):
+    assert main(["process", *photo_pair, "--max-disparity", "12", "--out", str(tmp_path / "a"), "--no-figures"]) == 0
+    assert main(["process", *photo_pair, "--max-disparity", "12", "--out", str(tmp_path / "b"), "--no-figures",
+                 "--keep-fraction", "0.5"]) == 0
+    full, half = (np.isfinite(tifffile.imread(tmp_path / n / "disparity.tif")).sum() for n in "ab")
+    assert abs(half - full / 2) <= 2
+
+
+@pytest.mark.parametrize("option, value, message", [
+    ("--keep-fraction", "0", "keep_fraction: expected a number in (0, 1]"),
+    ("--min-confidence", "-1", "min_confidence: expected a finite number >= 0"),
+])
+def test_bad_answer_options_are_one_line(photo_pair, tmp_path, capsys, option, value, message):
+    assert main(["process", *photo_pair, "--max-disparity", "12", "--out", str(tmp_path / "o"), option, value]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err, err
+    assert not (tmp_path / "o").exists()
