@@ -129,6 +129,7 @@ def pooled(arrays: list[dict]) -> dict:
         gt = np.concatenate([a["px gt"] for a in chosen])
         for name in PIXEL_METHODS:
             out[key][name] = rp.pixel_scores(np.concatenate([a[f"px {name}"] for a in chosen]), gt, None)
+            out[key][name]["masked"] = key == "pixels_masked"  # the pixels were chosen by each pair's mask
     return out
 
 
