@@ -109,9 +109,9 @@ class EnginePipeline:
     calls = []
 
     def __init__(self, height, width, *, cfa="GRBG", rig=None, min_disparity=None, max_disparity=None,
-                 weights=None, device=None, backend=None):
+                 weights=None, device=None, backend=None, config=None):
         self.calls.append(dict(height=height, width=width, cfa=cfa, rig=rig, min_disparity=min_disparity,
-                               max_disparity=max_disparity, device=device, backend=backend))
+                               max_disparity=max_disparity, device=device, backend=backend, config=config))
 
 
 @pytest.fixture
@@ -129,10 +129,14 @@ def pipeline(monkeypatch):
 def test_make_pipeline_with_the_engine(pipeline):
     calls = pipeline(EnginePipeline)
     rig = rigfile.load("binocular").referenced_to(0)
+    from tpnet_gpu.pipeline import PipelineConfig
+
     make_pipeline(24, 40, cfa=None, rig=rig, min_disparity=-1.0, max_disparity=12.5, device="cpu", backend="warp")
     assert calls == [dict(height=24, width=40, cfa=None, rig=rig, min_disparity=-1.0, max_disparity=12.5,
-                          device="cpu", backend="warp")]
+                          device="cpu", backend="warp", config=PipelineConfig())]
+    make_pipeline(24, 40, cfa=None, rig=rig, keep_fraction=0.5, cross_check=False)
+    assert calls[-1]["config"] == PipelineConfig(keep_fraction=0.5, cross_check=False)
     make_pipeline(32, 48, cfa="GRBG", rig=Rig(), device=None, backend=None)
-    assert calls[1]["max_disparity"] is None  # not given: Pipeline takes None as the engine's default (the rig's)
+    assert calls[-1]["max_disparity"] is None  # not given: Pipeline takes None as the engine's default (the rig's)
 
 
