@@ -48,12 +48,11 @@ def pair_folders(paths) -> list[Path]:
 
 def run_pair(pair: rp.Pair, backend: str | None, device: str) -> dict:
     """Every method's maps on one pair (host arrays cut to the image: tiles ``(ty, tx)``, pixels ``(h, w)``)."""
-    from tpnet_gpu import rigfile  # noqa: PLC0415 - torch and the kernels on use
-    from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415
-    from tpnet_gpu.stereo_io import PAIR_RIG, fit_rig, load_stereo_pair  # noqa: PLC0415
+    from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415 - torch and the kernels on use
+    from tpnet_gpu.stereo_io import load_inputs  # noqa: PLC0415
 
-    frames = load_stereo_pair(pair.left, pair.right)
-    rig = fit_rig(rigfile.load(PAIR_RIG), frames).referenced_to(0)
+    inputs = load_inputs([pair.left, pair.right])  # as `tpnet process LEFT RIGHT` reads them
+    frames, rig = inputs.frames, inputs.rig
     (height, width) = frames.padded
     out = {"size": frames.size}
     for name, config in (("tpnet", PipelineConfig()),
@@ -80,8 +79,11 @@ def run_pair(pair: rp.Pair, backend: str | None, device: str) -> dict:
 
 def cells(tiles: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """``(h, w)``: each pixel the answer of the tile whose 8x8 cell holds it."""
-    h, w = size
-    return np.repeat(np.repeat(tiles, 8, axis=0), 8, axis=1)[:h, :w]
+    import torch  # noqa: PLC0415
+
+    from tpnet_gpu.disparity.per_pixel import cell_field  # noqa: PLC0415
+
+    return cell_field(torch.from_numpy(tiles), tuple(size), 0, 0).numpy()
 
 
 def score_pair(pair: rp.Pair, maps: dict) -> tuple[dict, dict]:

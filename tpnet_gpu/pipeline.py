@@ -171,18 +171,19 @@ class Pipeline:
     def _checks(self, height, width, cfa, pairs, engine_config, device, backend) -> None:
         """The cross-check's engine (``PipelineConfig.cross_check``) and the per-pixel step's cameras."""
         cfg, rig = self.config, self.engine.rig
-        self.offsets = torch.tensor(rig.offsets_array(), dtype=torch.float32, device=self.device)
+        self.offsets = rig.offsets_array()  # (cams, 2) on the host: read once, not per frame
         two = rig.cams == 2
         self.cross_engine, self.cross_cam = None, cross_camera(self.offsets)
+        self.cross_offset = tuple(float(v) for v in self.offsets[self.cross_cam])
         if cfg.cross_check or (cfg.cross_check is None and two):
             self.cross_engine = DisparityEngine(height, width, rig=rig.referenced_to(self.cross_cam), pairs=pairs,
                                                 cfa=cfa, config=engine_config, device=device, backend=backend)
-        at_reference = torch.nonzero(self.offsets.norm(dim=1) < 1e-9)[:, 0]
-        possible = cfa is None and at_reference.numel() > 0
+        at_reference = np.nonzero(np.linalg.norm(self.offsets, axis=1) < 1e-9)[0]
+        possible = cfa is None and at_reference.size > 0
         if cfg.per_pixel and not possible:
             raise ValueError("per_pixel: needs mono frames (cfa None) and a rig with a camera at the reference "
                              f"(offset (0, 0)); got cfa {cfa!r} and offsets {rig.offsets_array().tolist()}")
-        self.reference_cam = int(at_reference[0]) if at_reference.numel() else None
+        self.reference_cam = int(at_reference[0]) if at_reference.size else None
         self.per_pixel = bool(cfg.per_pixel) or (cfg.per_pixel is None and possible and two)
 
     def _weights(self, weights, colours: int) -> Path | None:
@@ -247,28 +248,30 @@ class Pipeline:
         if self.per_pixel:  # from every answer: a tile the checks drop can still be a right pixel's candidate
             staging = self.engine.tp.staging  # the frames as the engine normalised them (ZNCC ignores the scale)
             pixels, _ = per_pixel(staging[self.reference_cam], staging[self.cross_cam], disparity,
-                                  offset=self.offsets[self.cross_cam].tolist())
+                                  offset=self.cross_offset)
         passes, keep = result.tile_passes, measured
         if self.cross_engine is not None or cfg.min_confidence > 0 or cfg.keep_fraction < 1:
-            keep = self._keep(frames, disparity, confidence)
+            keep = self._keep(disparity, confidence)
             disparity = torch.where(keep, disparity, torch.full_like(disparity, float("nan")))
             confidence = torch.where(keep, confidence, torch.zeros_like(confidence))
             passes += self._cross_passes
         return FrameResult(disparity, confidence, result.two_depth, initial, valid, texture, result.search,
                            passes, surfaces, pixels, keep)
 
-    def _keep(self, frames, disparity: torch.Tensor, confidence: torch.Tensor) -> torch.Tensor:
+    def _keep(self, disparity: torch.Tensor, confidence: torch.Tensor) -> torch.Tensor:
         """``(ty, tx)`` bool: the tiles ``PipelineConfig``'s checks and filters keep (see there); sets
         ``self._cross_passes`` (the cross-check's tile passes, 0 without it)."""
         cfg = self.config
         keep = torch.isfinite(disparity)
         self._cross_passes = 0.0
         if self.cross_engine is not None:
-            other = self.cross_engine.run(frames)
+            # from the frames the engine already staged on the device (not the caller's again: no second host
+            # copy and validation; its scale comes out 1)
+            other = self.cross_engine.run(self.engine.tp.staging)
             self._cross_passes = other.tile_passes
             size = (self.engine.tp.height, self.engine.tp.width)
             keep = keep & windows_inside(disparity, self.offsets, size) & (
-                cross_difference(disparity, other.disparity, self.offsets[self.cross_cam].tolist()) <= CROSS_CHECK_PX)
+                cross_difference(disparity, other.disparity, self.cross_offset) <= CROSS_CHECK_PX)
         if cfg.min_confidence > 0:
             keep = keep & (confidence >= cfg.min_confidence)
         if cfg.keep_fraction < 1 and bool(keep.any()):

@@ -95,3 +95,14 @@ def test_bench_real_on_tsukuba(tmp_path, capsys):
     assert tiles["tpnet"]["coverage"] <= tiles["tpnet, no checks"]["coverage"]
     assert pixels["tpnet per pixel"]["bad2"] < 0.12
     assert (tmp_path / "figs" / "tsukuba.png").stat().st_size > 10_000
+
+
+def test_bench_real_without_opencv_is_one_line(tmp_path, monkeypatch, capsys):
+    import sys
+
+    from tpnet_gpu import cli
+
+    monkeypatch.setitem(sys.modules, "cv2", None)  # import cv2 now fails as if OpenCV were not installed
+    assert cli.main(["bench", "real", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "opencv-python-headless" in err and err.count("\n") == 1, err

@@ -11,6 +11,7 @@ that fail either check are > 1 px off 67-86 % of the time, those that pass 5-39 
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 from tpnet_gpu.layout import TILE_SIZE, TILE_STRIDE
@@ -26,15 +27,16 @@ def tile_centres(grid: tuple[int, int], device) -> tuple[torch.Tensor, torch.Ten
     return x, y
 
 
-def windows_inside(disparity: torch.Tensor, offsets: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
+def windows_inside(disparity: torch.Tensor, offsets, size: tuple[int, int]) -> torch.Tensor:
     """``(ty, tx)`` bool: every camera's 16x16 window at ``disparity (ty, tx)`` overhangs images of ``size (h, w)``
     by no more than the reference's own border tiles do (4 px: its centre lies within the tile centres' span,
-    [4, w - 4] x [4, h - 4]); ``offsets (cams, 2)``. False where the disparity is NaN."""
+    [4, w - 4] x [4, h - 4]); ``offsets (cams, 2)`` on the host (NumPy or nested lists: no device read per
+    frame). False where the disparity is NaN."""
     x, y = tile_centres(disparity.shape, disparity.device)
     h, w = size
     margin = (TILE_SIZE - TILE_STRIDE) / 2  # the border tiles' overhang
     inside = torch.isfinite(disparity)
-    for ox, oy in offsets.tolist():
+    for ox, oy in np.asarray(offsets, dtype=np.float64).tolist():
         cx, cy = x - disparity * ox, y - disparity * oy
         inside = inside & (cx >= margin) & (cx <= w - margin) & (cy >= margin) & (cy <= h - margin)
     return inside
@@ -63,7 +65,8 @@ def cross_difference(disparity: torch.Tensor, other: torch.Tensor, offset) -> to
     return torch.where(torch.isfinite(disparity), best, torch.full_like(best, float("inf")))
 
 
-def cross_camera(offsets: torch.Tensor) -> int:
-    """The camera to cross-check with: the one farthest from the virtual camera (the last of equals)."""
-    norms = offsets.norm(dim=1)
-    return int(torch.nonzero(norms >= norms.max() - 1e-9)[-1, 0])
+def cross_camera(offsets) -> int:
+    """The camera to cross-check with: the one farthest from the virtual camera (the last of equals);
+    ``offsets (cams, 2)`` on the host."""
+    norms = np.linalg.norm(np.asarray(offsets, dtype=np.float64), axis=1)
+    return int(np.nonzero(norms >= norms.max() - 1e-9)[0][-1])
