@@ -206,24 +206,30 @@ def main(argv=None) -> dict:
         folders = pair_folders(args.dirs)
     except ValueError as exc:
         parser.error(str(exc))
+    report = {"bench": "real", **bench_folders(folders, args.backend, args.device, args.figures)}
+    if args.json:
+        common.save_json(report, args.json)
+    return report
+
+
+def bench_folders(folders, backend: str | None, device: str, figures) -> dict:
+    """Every method on each pair folder, scored; prints the table. ``figures``: folder of the per-scene figures
+    (falsy: none). Returns the report's body (pairs, per scene, pooled, machine, table lines)."""
     per_scene, arrays = {}, []
     for folder in folders:
         pair = rp.load_pair(folder)
-        maps = run_pair(pair, args.backend, args.device)
+        maps = run_pair(pair, backend, device)
         scores, arr = score_pair(pair, maps)
         per_scene[pair.name] = scores
         arrays.append(arr)
         log(f"{pair.name}: tpnet {scores['seconds']['tpnet']:.2f} s, SGBM {scores['seconds']['SGBM']:.3f} s")
-        if args.figures:
-            figure(Path(args.figures) / f"{pair.name}.png", pair, maps)
+        if figures:
+            figure(Path(figures) / f"{pair.name}.png", pair, maps)
     pool = pooled(arrays)
     lines = table(per_scene, pool)
     print("\n".join(lines))
-    report = {"bench": "real", "pairs": [str(f) for f in folders], "per_scene": per_scene, "pooled": pool,
-              "machine": common.machine_info(), "table": lines}
-    if args.json:
-        common.save_json(report, args.json)
-    return report
+    return {"pairs": [str(f) for f in folders], "per_scene": per_scene, "pooled": pool,
+            "machine": common.machine_info(), "table": lines}
 
 
 if __name__ == "__main__":

@@ -211,7 +211,7 @@ WEIGHTS_HELP = ("TPNET weights from `tpnet train` (default: the shipped ones for
                 "rig or other colours are refused")
 NO_FIGURES_HELP = "write no labelled figures (PNG, matplotlib): faster; the TIFFs, points.ply and texture.png stay"
 BENCHES = ("tp", "accuracy", "network", "network_limits", "network_context", "throughput", "startup", "fuzz",
-           "calibration", "ray", "flow", "two_surface", "real")
+           "calibration", "ray", "flow", "two_surface", "real", "rendered_pairs")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:

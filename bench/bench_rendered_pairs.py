@@ -1,0 +1,50 @@
+"""Rendered image pairs that fail the way real photographs do: the pipeline against OpenCV SGBM, case by case.
+
+Usage: ``tpnet bench rendered_pairs [--pairs DIR] [--cases a,b] [--size WxH] [--seed N]`` - renders the suite of
+``bench/rendered_pairs.py`` (one case per cause: exposure and tone differences, noise and JPEG, vertical
+misalignment, blur, half-occlusions, periodic patterns, thin structures, faint texture, all camera causes
+together; "clean" is the reference) in the ``realdata`` layout, then scores it exactly as ``tpnet bench real``
+does (same methods, same table). ``--pairs DIR`` keeps the pairs (a new or empty folder) so that
+``tpnet bench real DIR`` or ``tpnet process DIR/CASE/left.png DIR/CASE/right.png`` can read them again.
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+
+from tpnet_gpu.bench import bench_real, common
+from tpnet_gpu.bench import rendered_pairs as suite
+
+
+def main(argv=None) -> dict:
+    parser = common.parser(__name__, __doc__, full_help=True)
+    parser.add_argument("--pairs", default="", help="keep the rendered pairs in this new or empty folder")
+    parser.add_argument("--cases", default=",".join(suite.CASES), help="comma-separated cases (default: all)")
+    parser.add_argument("--size", default=f"{suite.SIZE[0]}x{suite.SIZE[1]}", help="WxH, multiples of 8")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the layout and the noise")
+    parser.add_argument("--backend", default=None, help="tile-processor kernels (default: the library's)")
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--json", default="out/bench_rendered_pairs.json", help="output JSON path ('' to skip)")
+    parser.add_argument("--figures", default="", help="folder of the per-case figures ('' to skip)")
+    args = parser.parse_args(argv)
+    common.require_extras("cv2")
+    cases = tuple(c for c in args.cases.split(",") if c)
+    unknown = sorted(set(cases) - set(suite.CASES))
+    if unknown or not cases:
+        parser.error(f"--cases: expected some of {','.join(suite.CASES)}, got {args.cases!r}")
+    (size,) = common.parse_sizes(args.size, "--size")
+    with tempfile.TemporaryDirectory(prefix="tpnet-rendered-pairs-") as scratch:
+        try:
+            folders = suite.write_suite(args.pairs or scratch, cases=cases, size=size, seed=args.seed)
+        except (FileExistsError, ValueError) as exc:
+            parser.error(f"--pairs/--size: {exc}")
+        report = {"bench": "rendered_pairs", "cases": list(cases), "size": list(size), "seed": args.seed,
+                  **bench_real.bench_folders(folders, args.backend, args.device, args.figures)}
+    if args.json:
+        common.save_json(report, args.json)
+    return report
+
+
+if __name__ == "__main__":
+    sys.exit(common.run(main))
