@@ -33,7 +33,15 @@ def main(argv=None) -> dict:
     unknown = sorted(set(cases) - set(suite.CASES))
     if unknown or not cases:
         parser.error(f"--cases: expected some of {','.join(suite.CASES)}, got {args.cases!r}")
-    (size,) = common.parse_sizes(args.size, "--size")
+    if args.seed < 0:
+        parser.error(f"--seed: expected an integer >= 0, got {args.seed}")
+    try:
+        sizes = common.parse_sizes(args.size, "--size")
+    except ValueError as exc:
+        parser.error(str(exc))
+    if len(sizes) != 1:
+        parser.error(f"--size: expected one WxH, got {args.size!r}")
+    (size,) = sizes
     with tempfile.TemporaryDirectory(prefix="tpnet-rendered-pairs-") as scratch:
         try:
             folders = suite.write_suite(args.pairs or scratch, cases=cases, size=size, seed=args.seed)

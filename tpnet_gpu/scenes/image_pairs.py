@@ -121,10 +121,12 @@ def _left_truth(scene: Scene, rig: Rig, right_rig: Rig) -> tuple[np.ndarray, np.
     # the right camera's pixel of the same point: x - d, and the right image's content is vertical_px lower
     shift_y = right_rig.principal()[1, 1] - rig.principal()[1, 1]
     seen = np.stack([pixels[:, 0] - disparity, pixels[:, 1] + shift_y], axis=-1)
-    inside = np.isfinite(disparity) & (seen[:, 0] >= 0) & (seen[:, 0] < width)
+    inside = (np.isfinite(disparity) & (seen[:, 0] >= 0) & (seen[:, 0] < width) & (seen[:, 1] >= 0)
+              & (seen[:, 1] < height))
     probe = np.where(inside[:, None], seen, 0.5)
     _, depth_right, _ = scene.trace(np.broadcast_to(lens[1], (len(pixels), 3)), right_rig.pixel_rays(1, probe))
-    nonocc = inside & (np.abs(depth_right - depth) < SAME_POINT_MM)
+    same = np.abs(np.where(inside, depth_right - np.where(inside, depth, 0.0), np.inf)) < SAME_POINT_MM  # no inf - inf
+    nonocc = inside & same
     return disparity.reshape(height, width), nonocc.reshape(height, width)
 
 
