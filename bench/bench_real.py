@@ -7,7 +7,9 @@ checks" (every tile answered: ``PipelineConfig(cross_check=False)``), and SGBM (
 uniqueness 5, disp12MaxDiff 1, ``bench/peers.py``), all on the images' luma. Scored per tile (the tile grid in
 the left image; GT = half-sine-weighted mean of the window's GT, "fronto" = GT spread <= 1 px; SGBM's map sampled
 the same way) - coverage, share > 1 px off (strict, and either-surface: within 1 px of >= 10 % of the window's
-GT), fronto median, share > 1 px off among the most confident answers as many as SGBM gives - and per pixel
+GT), fronto median, share > 1 px off among the most confident answers as many as SGBM gives (ranked over every
+tile the method answers before its confidence floor: for tpnet's per-pixel check, ``pixel_check.tile_answers``
+of its result's pixels, so a default output below SGBM's coverage is ranked fairly) - and per pixel
 (bad 1.0 / bad 2.0 / avgerr on non-occluded pixels where a mask exists, no answer counted bad): the pipeline's
 ``disparity_px``, its tile map spread over each tile's 8x8 cell, SGBM. Pooled = all scenes' tiles (pixels)
 together. A table, JSON, and a figure per scene (left image, GT, ours, SGBM, error maps, one colour scale).
@@ -48,7 +50,8 @@ def pair_folders(paths) -> list[Path]:
 
 def run_pair(pair: rp.Pair, backend: str | None, device: str) -> dict:
     """Every method's maps on one pair (host arrays cut to the image: tiles ``(ty, tx)``, pixels ``(h, w)``)."""
-    from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415 - torch and the kernels on use
+    from tpnet_gpu.disparity.pixel_check import tile_answers  # noqa: PLC0415 - torch and the kernels on use
+    from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415
     from tpnet_gpu.stereo_io import load_inputs  # noqa: PLC0415
 
     inputs = load_inputs([pair.left, pair.right])  # as `tpnet process LEFT RIGHT` reads them
@@ -66,6 +69,9 @@ def run_pair(pair: rp.Pair, backend: str | None, device: str) -> dict:
         host = lambda t: None if t is None else t.detach().cpu().numpy().astype(np.float64)  # noqa: E731
         out[name] = {"tiles": frames.crop_tiles(host(result.disparity)),
                      "confidence": frames.crop_tiles(host(result.confidence)), "seconds": seconds}
+        if result.pixels_measured is not None:  # every tile's answer and confidence, before the floor drops any
+            ranked = tile_answers(result.pixels, result.pixels_measured, result.initial)
+            out[name]["ranked"] = tuple(frames.crop_tiles(host(t)) for t in ranked)
         if result.pixels is not None:
             out[name]["pixels"] = frames.crop_image(host(result.pixels))
     left, right = (frames.crop_image(f) for f in frames.frames)
@@ -100,7 +106,11 @@ def score_pair(pair: rp.Pair, maps: dict) -> tuple[dict, dict]:
                                                either)
         if conf is None:  # no ranking: its own answers are its "most confident" at its coverage
             scores["tiles"][name]["gross_at_coverage"] = scores["tiles"][name]["gross"]
-        arrays[name] = (m["tiles"], conf if conf is not None else np.ones_like(m["tiles"]), either)
+        arrays[name] = (m["tiles"], conf if conf is not None else np.ones_like(m["tiles"]), either,
+                        *m.get("ranked", (m["tiles"], conf if conf is not None else np.ones_like(m["tiles"]))))
+        if "ranked" in m:
+            ranked_tiles, ranked_conf = m["ranked"]
+            scores["tiles"][name]["gross_at_coverage"] = rp.gross_at_coverage(ranked_tiles, truth, ranked_conf, sg_cov)
     pixel_maps = {"tpnet per pixel": maps["tpnet"]["pixels"], "tpnet tile cells": cells(maps["tpnet"]["tiles"],
                   maps["size"]), "SGBM": maps["SGBM"]["pixels"]}
     scored = np.isfinite(pair.gt) if pair.mask is None else np.isfinite(pair.gt) & pair.mask
@@ -125,6 +135,8 @@ def pooled(arrays: list[dict]) -> dict:
                                             sg if has_conf else None, cat(name, 2))
         if not has_conf:
             out["tiles"][name]["gross_at_coverage"] = out["tiles"][name]["gross"]
+        else:  # ranked over every answer the method has (module docstring)
+            out["tiles"][name]["gross_at_coverage"] = rp.gross_at_coverage(cat(name, 3), truth, cat(name, 4), sg)
     for key, chosen in (("pixels", arrays), ("pixels_masked", [a for a in arrays if a["masked"]])):
         if not chosen:
             continue

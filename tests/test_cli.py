@@ -128,7 +128,8 @@ class RecordingEngine:
         h, w = self.shape
         tiles = torch.arange(h // 8 * (w // 8), dtype=torch.float32).reshape(h // 8, w // 8)
         texture = torch.arange(4 * h * w, dtype=torch.float32).reshape(4, h, w)
-        return SimpleNamespace(disparity=tiles, confidence=tiles + 0.5, texture=texture, pixels=None)
+        return SimpleNamespace(disparity=tiles, confidence=tiles + 0.5, texture=texture, pixels=None,
+                               pixels_measured=None)
 
 
 @pytest.fixture

@@ -43,8 +43,12 @@ def test_per_pixel_files(photo_pair, tmp_path):
     depth = tifffile.imread(out / "depth_px.tif")
     finite = np.isfinite(pixels) & (pixels > 0)
     np.testing.assert_allclose(depth[finite], rig.distance(pixels[finite].astype(np.float64)), rtol=1e-5)
+    # the left-right check: what both cameras see passes, the strip whose match leaves the right image does not
+    # (its pixels carry the fill); the point cloud has the measured pixels only
+    measured = np.asarray(Image.open(out / "measured_px.png")) == 255
+    assert measured[8:-8, 20:-8].mean() > 0.95 and not measured[:, : int(D)].any()
     header = (out / "points_px.ply").read_bytes()[:400].decode("ascii", "replace")
-    assert f"element vertex {int(finite.sum())}" in header
+    assert f"element vertex {int((finite & measured).sum())}" in header
     assert (out / "disparity_px.png").is_file()
 
 

@@ -10,8 +10,9 @@ Files (tile maps are ``(ceil(h / 8), ceil(w / 8))``, one value per tile, for inp
 * ``texture.tif`` float32 ``(channels, h, w)`` (R, G, B, alpha or Y, alpha; the frames' units), ``texture.png``
   its 8-bit picture (pixels, RGBA) and ``texture_figure.png`` that picture with axes and a title;
 * ``disparity_px.tif`` float32 ``(h, w)`` px per pixel (NaN: none) and its figure, where the pipeline made one
-  (mono frames of a stereo pair, ``PipelineConfig.per_pixel``); with ``per_pixel`` (``tpnet process --per-pixel``)
-  also ``depth_px.tif`` and ``points_px.ply`` (a point per pixel);
+  (mono frames of a stereo pair, ``PipelineConfig.per_pixel``), ``measured_px.png`` (255: the pixel passed the
+  left-right check, 0: background fill) where that check ran; with ``per_pixel`` (``tpnet process --per-pixel``)
+  also ``depth_px.tif`` and ``points_px.ply`` (a point per measured pixel);
 * with ``tpnet process --two-surface`` (``write_surfaces``): ``foreground.tif``, ``background.tif`` float32 px and
   ``w_foreground.tif`` (the foreground's weight), NaN where the tile shows one surface.
 """
@@ -42,6 +43,8 @@ class FrameMaps:
         rig: the rig whose virtual camera the tile grid is in (depth and points go through it).
         white: the texture level drawn as white in the 8-bit pictures and the points' colours (frames' units).
         pixels: ``(h, w)`` float32 disparity per pixel, px, NaN where none; or None.
+        measured: ``(h, w)`` bool, the pixels of ``pixels`` the per-pixel left-right check kept (the rest is
+            the background fill, disparity.md §10); or None (no check ran: every value is a match).
     """
 
     disparity: np.ndarray
@@ -50,6 +53,7 @@ class FrameMaps:
     rig: Rig
     white: float
     pixels: np.ndarray | None = None
+    measured: np.ndarray | None = None
 
     @property
     def size(self) -> tuple[int, int]:
@@ -67,13 +71,15 @@ def from_result(result, rig: Rig, *, frames=None, white: float | None = None) ->
 
     disparity, confidence, texture = host(result.disparity), host(result.confidence), host(result.texture)
     pixels = host(result.pixels)
+    measured = None if result.pixels_measured is None else result.pixels_measured.detach().cpu().numpy()
     if frames is not None:
         disparity, confidence = frames.crop_tiles(disparity), frames.crop_tiles(confidence)
         texture = None if texture is None else frames.crop_image(texture)
         pixels = None if pixels is None else frames.crop_image(pixels)
+        measured = None if measured is None else frames.crop_image(measured)
     if white is None:
         white = float(np.nanpercentile(texture[:-1], 99.5)) if texture is not None else 1.0
-    return FrameMaps(disparity, confidence, texture, rig, max(white, 1e-9), pixels)
+    return FrameMaps(disparity, confidence, texture, rig, max(white, 1e-9), pixels, measured)
 
 
 def method(pipeline) -> str:
@@ -141,21 +147,29 @@ def write(folder, maps: FrameMaps, *, scene: str, what: str, figures: bool = Tru
 
 
 def _write_pixels(folder, maps: FrameMaps, *, scene: str, what: str, per_pixel: bool) -> list[str]:
-    """``disparity_px.tif``; with ``per_pixel`` also ``depth_px.tif`` and ``points_px.ply``."""
+    """``disparity_px.tif`` (and ``measured_px.png`` where the left-right check ran); with ``per_pixel`` also
+    ``depth_px.tif`` and ``points_px.ply`` (measured pixels only: no point for a filled one)."""
     import tifffile  # noqa: PLC0415
 
+    from tpnet_gpu.images import save_png  # noqa: PLC0415
+
     tifffile.imwrite(folder / "disparity_px.tif", maps.pixels.astype(np.float32))
+    written = ["disparity_px.tif"]
+    if maps.measured is not None:
+        save_png(folder / "measured_px.png", np.where(maps.measured, 255, 0).astype(np.uint8))
+        written.append("measured_px.png")
     if not per_pixel:
-        return ["disparity_px.tif"]
+        return written
     tifffile.imwrite(folder / "depth_px.tif", pointcloud.depth(maps.pixels, maps.rig))
-    points, mask = pointcloud.pixel_points(maps.pixels, maps.rig)
+    matched = maps.pixels if maps.measured is None else np.where(maps.measured, maps.pixels, np.nan)
+    points, mask = pointcloud.pixel_points(matched, maps.rig)
     colours = None
     if maps.texture is not None:  # the texture's own pixel, gamma-encoded as texture.png
         colours = texture_rgba(maps.texture, maps.white)[..., :3][mask]
     pointcloud.write_ply(folder / "points_px.ply", points, colours,
-                         comments=(f"tpnet-gpu {scene}, {what}: one point per pixel with a disparity",
+                         comments=(f"tpnet-gpu {scene}, {what}: one point per matched pixel with a disparity",
                                    "metres; rig axes: x right, y up, z toward the viewer (points in front: z < 0)"))
-    return ["disparity_px.tif", "depth_px.tif", "points_px.ply"]
+    return written + ["depth_px.tif", "points_px.ply"]
 
 
 def _figures(folder, maps: FrameMaps, *, scene: str, what: str) -> list[str]:

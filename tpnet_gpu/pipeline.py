@@ -27,6 +27,7 @@ from tpnet_gpu.disparity.checks import CROSS_CHECK_PX, cross_camera, cross_diffe
 from tpnet_gpu.disparity.engine import DisparityEngine
 from tpnet_gpu.disparity.grid import grow
 from tpnet_gpu.disparity.per_pixel import per_pixel
+from tpnet_gpu.disparity.pixel_check import MIN_SUPPORT, fill_background, left_right, tile_answers
 from tpnet_gpu.disparity.two_surface import Surfaces, measure_surfaces
 from tpnet_gpu.net import infer
 from tpnet_gpu.net.context import context_step
@@ -50,7 +51,11 @@ class PipelineConfig:
     a second engine run); then tiles of confidence below ``min_confidence`` and all but the ``keep_fraction``
     most confident answers have none. ``per_pixel``: also a per-pixel disparity (``FrameResult.pixels``) from
     the tile answers (``disparity/per_pixel.py``; mono frames with a camera at the reference; None: on where
-    that holds and the rig has two cameras)."""
+    that holds and the rig has two cameras). With both (mono pairs by default) the check is made per pixel
+    instead (disparity.md §10, ``disparity/pixel_check.py``): each view's per-pixel map, a left-right check,
+    the rejected pixels filled with the background, and each tile's answer the window's mean of those pixels,
+    its confidence the share of the window that backs it (no value below ``pixel_check.MIN_SUPPORT``, nor
+    where the windows leave an image at the answer)."""
 
     engine: EngineConfig = EngineConfig()
     network_passes: int = 1
@@ -82,7 +87,10 @@ class FrameResult:
             has weights for its rig, ``Pipeline.weights``, else the engine's); NaN where the engine gave none (it
             trusted no measurement and had no clear first-stage answer on the tile's surface: grid.fill).
         confidence: ``(tiles_y, tiles_x)`` the engine's confidence (its final correlation peak's strength,
-            scaled down on two-depth tiles; higher = surer), 0 = none (NaN tiles and tiles grid.fill gave).
+            scaled down on two-depth tiles; higher = surer), 0 = none (NaN tiles and tiles grid.fill gave);
+            where the per-pixel check ran (``pixels_measured``), the share of the tile's window (half-sine
+            weight, 0..1) whose checked pixels back the answer within 1 px, and ``disparity`` the window's mean
+            of the checked, background-filled ``pixels``.
         two_depth: ``(tiles_y, tiles_x)`` bool: the tile's window straddles two depths (its neighbours'
             disparities span more than 1 px): flagged, not a surface to trust (grid.two_depth).
         initial: ``(tiles_y, tiles_x)`` the engine's disparities the network read its layers at (NaN = none).
@@ -99,6 +107,9 @@ class FrameResult:
             camera, px (NaN = none), else None.
         checked: ``(tiles_y, tiles_x)`` bool: the tiles the checks and the confidence filters kept
             (``PipelineConfig``); ``disparity`` is NaN elsewhere.
+        pixels_measured: where the per-pixel left-right check ran (``per_pixel`` and ``cross_check``, the
+            default for mono pairs): ``(H, W)`` bool, the pixels whose match in the other view answered back the
+            same disparity; ``pixels`` elsewhere is the background fill (disparity.md §10). Else None.
     """
 
     disparity: torch.Tensor
@@ -112,6 +123,7 @@ class FrameResult:
     surfaces: Surfaces | None = None
     pixels: torch.Tensor | None = None
     checked: torch.Tensor | None = None
+    pixels_measured: torch.Tensor | None = None
 
 
 class Pipeline:
@@ -244,40 +256,53 @@ class Pipeline:
         if cfg.two_surface:  # its passes overwrite the engine's processor's views: keep the mask first
             valid = valid.clone()
             surfaces = measure_surfaces(self.engine, disparity)
-        pixels = None
+        pixels = pixels_measured = other = None
+        engine_confidence = confidence
         if self.per_pixel:  # from every answer: a tile the checks drop can still be a right pixel's candidate
             staging = self.engine.tp.staging  # the frames as the engine normalised them (ZNCC ignores the scale)
             pixels, _ = per_pixel(staging[self.reference_cam], staging[self.cross_cam], disparity,
                                   offset=self.cross_offset)
+            if self.cross_engine is not None:  # the left-right check per pixel, and tiles from its pixels
+                other = self.cross_engine.run(staging)
+                back = tuple(-v for v in self.cross_offset)  # the reference camera, seen from the other one
+                other_pixels, _ = per_pixel(staging[self.cross_cam], staging[self.reference_cam], other.disparity,
+                                            offset=back)
+                pixels_measured = left_right(pixels, other_pixels, self.cross_offset)
+                pixels = fill_background(torch.where(pixels_measured, pixels, torch.full_like(pixels, float("nan"))),
+                                         self.cross_offset)
+                disparity, confidence = tile_answers(pixels, pixels_measured, disparity)
         passes, keep = result.tile_passes, measured
         if self.cross_engine is not None or cfg.min_confidence > 0 or cfg.keep_fraction < 1:
-            keep = self._keep(disparity, confidence)
+            keep = self._keep(disparity, confidence, other, engine_confidence)
             disparity = torch.where(keep, disparity, torch.full_like(disparity, float("nan")))
             confidence = torch.where(keep, confidence, torch.zeros_like(confidence))
             passes += self._cross_passes
         return FrameResult(disparity, confidence, result.two_depth, initial, valid, texture, result.search,
-                           passes, surfaces, pixels, keep)
+                           passes, surfaces, pixels, keep, pixels_measured)
 
-    def _keep(self, disparity: torch.Tensor, confidence: torch.Tensor) -> torch.Tensor:
+    def _keep(self, disparity: torch.Tensor, confidence: torch.Tensor, other, tiebreak: torch.Tensor) -> torch.Tensor:
         """``(ty, tx)`` bool: the tiles ``PipelineConfig``'s checks and filters keep (see there); sets
-        ``self._cross_passes`` (the cross-check's tile passes, 0 without it)."""
+        ``self._cross_passes`` (the cross-check's tile passes, 0 without it). ``other``: the cross-check's
+        engine result where the per-pixel check ran (its tiles' confidence is their support), else None;
+        ``tiebreak``: orders tiles of equal confidence for ``keep_fraction`` (the engine's confidence)."""
         cfg = self.config
         keep = torch.isfinite(disparity)
         self._cross_passes = 0.0
-        if self.cross_engine is not None:
+        size = (self.engine.tp.height, self.engine.tp.width)
+        if other is not None:
+            self._cross_passes = other.tile_passes
+            keep = keep & windows_inside(disparity, self.offsets, size) & (confidence >= MIN_SUPPORT)
+        elif self.cross_engine is not None:
             # from the frames the engine already staged on the device (not the caller's again: no second host
             # copy and validation; its scale comes out 1)
             other = self.cross_engine.run(self.engine.tp.staging)
             self._cross_passes = other.tile_passes
-            size = (self.engine.tp.height, self.engine.tp.width)
             keep = keep & windows_inside(disparity, self.offsets, size) & (
                 cross_difference(disparity, other.disparity, self.cross_offset) <= CROSS_CHECK_PX)
         if cfg.min_confidence > 0:
             keep = keep & (confidence >= cfg.min_confidence)
         if cfg.keep_fraction < 1 and bool(keep.any()):
-            values = confidence[keep]
-            floor = torch.quantile(values.double(), 1.0 - cfg.keep_fraction).to(values.dtype)
-            keep = keep & (confidence >= floor)
+            keep = _most_confident(keep, confidence, tiebreak, cfg.keep_fraction)
         return keep
 
     def stream(self, frames: Iterable) -> Iterator[FrameResult | FrameError]:
@@ -293,6 +318,19 @@ class Pipeline:
                 yield FrameError(index, exc)
                 continue
             yield result
+
+
+def _most_confident(keep: torch.Tensor, confidence: torch.Tensor, tiebreak: torch.Tensor,
+                    fraction: float) -> torch.Tensor:
+    """``keep (ty, tx)`` cut to its ``ceil(fraction * n)`` most confident tiles, equal confidences ordered by
+    ``tiebreak`` (the per-pixel check's confidence is a share of a window: whole tiles tie at 1)."""
+    index = torch.nonzero(keep.reshape(-1)).squeeze(1)
+    order = torch.argsort(tiebreak.reshape(-1)[index], descending=True, stable=True)
+    order = order[torch.argsort(confidence.reshape(-1)[index][order], descending=True, stable=True)]
+    take = int(np.ceil(fraction * index.numel()))
+    out = torch.zeros_like(keep).reshape(-1)
+    out[index[order[:take]]] = True
+    return out.reshape(keep.shape)
 
 
 def _fits_colours(weights, colours: int) -> bool:
