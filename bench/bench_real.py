@@ -205,13 +205,18 @@ def table(per_scene: dict, pool: dict) -> list[str]:
     return lines
 
 
+def add_run_options(parser, json: str, figures: str) -> None:
+    """The options of a bench that scores pair folders with ``bench_folders`` (defaults ``json``, ``figures``)."""
+    parser.add_argument("--backend", default=None, help="tile-processor kernels (default: the library's)")
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--json", default=json, help="output JSON path ('' to skip)")
+    parser.add_argument("--figures", default=figures, help="folder of the per-scene figures ('' to skip)")
+
+
 def main(argv=None) -> dict:
     parser = common.parser(__name__, __doc__, full_help=True)
     parser.add_argument("dirs", nargs="+", metavar="DIR", help="pair folders, or folders of them")
-    parser.add_argument("--backend", default=None, help="tile-processor kernels (default: the library's)")
-    parser.add_argument("--device", default="cpu")
-    parser.add_argument("--json", default="out/bench_real.json", help="output JSON path ('' to skip)")
-    parser.add_argument("--figures", default="out/bench_real", help="folder of the per-scene figures ('' to skip)")
+    add_run_options(parser, "out/bench_real.json", "out/bench_real")
     args = parser.parse_args(argv)
     common.require_extras("cv2")
     try:

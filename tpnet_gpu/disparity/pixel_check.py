@@ -13,7 +13,7 @@ least ``MIN_MEASURED`` of the window's weight; elsewhere the engine's answer sta
 share of the window's weight whose measured pixels agree with the answer within ``AGREE_PX``: how much of the
 window backs it. A tile under ``MIN_SUPPORT`` has no value by default. On the six real pairs of
 ``../shared/realdata`` this ranking leaves 9.5 % of tiles > 1 px off at OpenCV SGBM's coverage (SGBM 15.5 %;
-the tile cross-check's ranking 17.1 %), docs/results.md §8.
+the tile cross-check's ranking 17.1 %), docs/results.md §2.
 """
 
 from __future__ import annotations
