@@ -1,7 +1,7 @@
 """Rendered image pairs that fail the way real photographs do: the pipeline against OpenCV SGBM, case by case.
 
-Usage: ``tpnet bench rendered_pairs [--pairs DIR] [--cases a,b] [--size WxH] [--seed N]`` - renders the suite of
-``bench/rendered_pairs.py`` (one case per cause: exposure and tone differences, noise and JPEG, vertical
+Usage: ``tpnet bench rendered_pairs [--pairs DIR] [--cases a,b] [--size WxH] [--seed N] [--gt-step S]`` - renders
+the suite of ``bench/rendered_pairs.py`` (one case per cause: exposure and tone differences, noise and JPEG, vertical
 misalignment, blur, half-occlusions, periodic patterns, thin structures, faint texture, all camera causes
 together; "clean" is the reference) in the ``realdata`` layout, then scores it exactly as ``tpnet bench real``
 does (same methods, same table). ``--pairs DIR`` keeps the pairs (a new or empty folder) so that
@@ -23,6 +23,8 @@ def main(argv=None) -> dict:
     parser.add_argument("--cases", default=",".join(suite.CASES), help="comma-separated cases (default: all)")
     parser.add_argument("--size", default=f"{suite.SIZE[0]}x{suite.SIZE[1]}", help="WxH, multiples of 8")
     parser.add_argument("--seed", type=int, default=0, help="seed of the layout and the noise")
+    parser.add_argument("--gt-step", type=float, default=None,
+                        help="score against the GT rounded to this step, px (the real pairs' GT: 1/8 to 1 px)")
     bench_real.add_run_options(parser, "out/bench_rendered_pairs.json", "")
     args = parser.parse_args(argv)
     common.require_extras("cv2")
@@ -41,11 +43,12 @@ def main(argv=None) -> dict:
     (size,) = sizes
     with tempfile.TemporaryDirectory(prefix="tpnet-rendered-pairs-") as scratch:
         try:
-            folders = suite.write_suite(args.pairs or scratch, cases=cases, size=size, seed=args.seed)
+            folders = suite.write_suite(args.pairs or scratch, cases=cases, size=size, seed=args.seed,
+                                        gt_step=args.gt_step)
         except (FileExistsError, ValueError) as exc:
-            parser.error(f"--pairs/--size: {exc}")
+            parser.error(f"--pairs/--size/--gt-step: {exc}")
         report = {"bench": "rendered_pairs", "cases": list(cases), "size": list(size), "seed": args.seed,
-                  **bench_real.bench_folders(folders, args.backend, args.device, args.figures)}
+                  "gt_step": args.gt_step, **bench_real.bench_folders(folders, args.backend, args.device, args.figures)}
     if args.json:
         common.save_json(report, args.json)
     return report

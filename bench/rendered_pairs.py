@@ -92,14 +92,21 @@ def case_scene(case: str, rig: Rig, seed: int) -> Scene:
     return Scene(items, Sky(), name=case)
 
 
-def write_suite(folder, *, cases=tuple(CASES), size=SIZE, seed: int = 0, supersample: int = 2) -> list[Path]:
+def write_suite(folder, *, cases=tuple(CASES), size=SIZE, seed: int = 0, supersample: int = 2,
+                gt_step: float | None = None) -> list[Path]:
     """Render ``cases`` into ``folder/CASE`` (the ``realdata`` layout); the objects' layout is the same for every
-    camera case (one ``seed``). Returns the pair folders."""
+    camera case (one ``seed``). ``gt_step``: store the GT rounded to this step (px), as the real pairs' GT is (1/8
+    to 1 px), to see what that rounding does to the scores; None: exact (to 1/64 px). Returns the pair folders."""
+    if gt_step is not None and not 1 / 64 <= gt_step <= 4:
+        raise ValueError(f"gt_step: expected 1/64 .. 4 px or None, got {gt_step}")
     rig = pair_rig(*size)
     out = []
     for case in cases:
         scene = case_scene(case, rig, seed)
         pair = render_pair(scene, rig, CASES[case], supersample=supersample, seed=seed)
+        if gt_step is not None:
+            pair = replace(pair, disparity=np.round(pair.disparity / gt_step) * gt_step)
+        step = "" if gt_step is None else f", GT rounded to {gt_step:g} px"
         out.append(write_pair(pair, Path(folder) / case, max_disparity=MAX_DISPARITY,
-                              source=f"tpnet bench rendered_pairs: case {case}, seed {seed}, {size[0]}x{size[1]}"))
+                              source=f"tpnet bench rendered_pairs: case {case}, seed {seed}, {size[0]}x{size[1]}{step}"))
     return out

@@ -133,3 +133,18 @@ def test_bench_rendered_pairs_refuses_a_bad_option_naming_it(capsys, option, val
 
     assert common.run(bench_rendered_pairs.main, [option, value, "--json", ""]) == 2
     assert option in capsys.readouterr().err
+
+
+def test_gt_step_rounds_the_stored_gt_like_the_real_pairs(written, tmp_path):
+    """Oracle: the definition of rounding - every stored value a multiple of the step, within half a step of the
+    exact GT of the same seed (gt.png keeps 1/64 px: each within 1/128 more)."""
+    _, _, folders = written
+    exact = rp.load_pair(folders[0]).gt
+    (folder,) = suite.write_suite(tmp_path, cases=("clean",), size=SIZE, seed=3, supersample=1, gt_step=0.25)
+    stepped = rp.load_pair(folder).gt
+    tol = 1 / 128 + 1e-9  # gt.png's own rounding, on both
+    assert np.abs(stepped - exact).max() <= 0.125 + 2 * tol  # within half a step of the exact GT
+    assert np.abs(stepped / 0.25 - np.round(stepped / 0.25)).max() * 0.25 <= tol  # on the step's multiples
+    assert len(np.unique(stepped)) < len(np.unique(exact)) / 4
+    with pytest.raises(ValueError, match="gt_step"):
+        suite.write_suite(tmp_path / "no", cases=("clean",), size=SIZE, gt_step=0.0)
