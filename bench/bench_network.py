@@ -1,7 +1,7 @@
 """The disparity engine and TPNET against the old sweep + LMA loop on held-out rendered scenes.
 
     tpnet bench network [--scenes 4] [--width 640 --height 480] [--passes 3] [--weights PATH] [--rig FILE]
-                        [--json ...] [--png ...]
+                        [--mono] [--json ...] [--png ...]
     python -m tpnet_gpu.bench.bench_network [same options]
 
 Scenes are rendered fresh with seeds no training scene uses (``--seed`` 10000+), the demo scene first. Methods:
@@ -16,8 +16,9 @@ confidence ranking, tile-processor passes and seconds per frame (the engine time
 ``--rig FILE`` (a rig file or a shipped one, at the bench's size when ideal) renders the scenes with that rig; a rig
 other than the quad has no old loop (quad only): its methods are the engine (and the engine with the LMA where its
 pairs lie along quad pairs, ``disparity.measure.lma_slots``: the binocular rig) and TPNET with the weights trained
-for its layer lags (default: the shipped ones), scored against the engine. Table + JSON + PNG (the PNG needs
-matplotlib, of the optional ``bench`` extra).
+for its layer lags (default: the shipped ones), scored against the engine. ``--mono``: mono cameras (grey frames,
+no old loop) and weights trained on them. Table + JSON + PNG (the PNG needs matplotlib, of the optional ``bench``
+extra).
 """
 
 from __future__ import annotations
@@ -76,7 +77,9 @@ def main(argv=None) -> dict:
     parser.add_argument("--weights", default=None, help="TPNET weights (default: the shipped ones)")
     parser.add_argument("--passes", type=int, default=3, help="most network passes (re-measured at its own output)")
     parser.add_argument("--rig", default=None, help="rig file or shipped rig name (default: the quad)")
+    parser.add_argument("--mono", action="store_true", help="mono cameras (grey frames; the weights must be mono)")
     args = parser.parse_args(argv)
+    cfa = None if args.mono else Sensor().cfa
     if args.scenes < 1 or args.passes < 1:
         parser.error("--scenes, --passes: expected at least 1")
     if args.png:
@@ -86,29 +89,33 @@ def main(argv=None) -> dict:
     if args.rig is not None:
         rig = rigfile.load(args.rig)
         rig = replace(rig, width=args.width, height=args.height, _cache={}) if rig.is_ideal() else rig
-    quad = lags_match(rig_lags(rig.offsets), QUAD_LAGS)
+    quad = lags_match(rig_lags(rig.offsets), QUAD_LAGS) and cfa is not None  # the old loop reads Bayer frames
     # the old loop is the quad's only; the LMA also takes rigs whose pairs lie along quad pairs (binocular)
     lma = quad or lma_slots(pair_vectors(rig.offsets, default_pairs(rig.offsets))) is not None
     engine_names = ENGINES if lma else {ENGINE: "axis"}
-    weights = args.weights if args.weights is not None else infer.shipped_for(rig_lags(rig.offsets))
+    colours = 1 if cfa is None else 3
+    weights = args.weights if args.weights is not None else infer.shipped_for(rig_lags(rig.offsets), colours)
     if weights is None:
-        parser.error(f"--weights: no shipped TPNET weights for this rig (layer lags {rig_lags(rig.offsets)})")
+        parser.error(f"--weights: no shipped TPNET weights for this rig (layer lags {rig_lags(rig.offsets)}) and "
+                     f"{colours}-colour frames")
+    if not infer.fits_colours(weights, colours):
+        parser.error(f"--weights: {weights} were not trained on {colours}-colour frames (--mono: mono)")
     if not lags_match(infer.lags(weights), rig_lags(rig.offsets)):
         parser.error(f"--weights: {weights} were trained for layer lags {infer.lags(weights)}, the rig's are "
                      f"{rig_lags(rig.offsets)}")
     model = infer.load(weights, device=args.device)
     base_tp = TileProcessor(rig.height, rig.width, config=BASELINE_CORRELATION, device=args.device) if quad else None
-    engines = {name: DisparityEngine(rig.height, rig.width, rig=rig, config=EngineConfig(measure=measure),
+    engines = {name: DisparityEngine(rig.height, rig.width, rig=rig, cfa=cfa, config=EngineConfig(measure=measure),
                                      device=args.device) for name, measure in engine_names.items()}
     network_tp = engines[ENGINE].tp
     layers = NetworkLayers(rig.offsets, network_tp.pairs, network_tp.torch_device)
     if infer.correlation(weights).resolved(network_tp.colours) != network_tp.config:
         network_tp = TileProcessor(rig.height, rig.width, camera_offsets=rig.offsets_array(), pairs=network_tp.pairs,
-                                   config=infer.correlation(weights), device=args.device)
+                                   cfa=cfa, config=infer.correlation(weights), device=args.device)
     scenes = []
     for index in range(args.scenes):
         scene = report_tools.bench_scene(rig, args.seed, index)
-        rendered = render(scene, rig, sensor=Sensor(), supersample=2, seed=args.seed + index)
+        rendered = render(scene, rig, sensor=Sensor(cfa=cfa), supersample=2, seed=args.seed + index)
         frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
         shape = rendered.tile_disparity.shape
         estimates, confidences, costs, results = {}, {}, {}, {}
@@ -150,12 +157,13 @@ def main(argv=None) -> dict:
 
     methods = ([OLD] if quad else []) + [*engine_names] + [name for n in range(1, args.passes + 1)
                                                            for name in (pass_name(n, context=False), pass_name(n))]
-    rig_text = "" if args.rig is None else f", rig {args.rig} ({rig.cams} cameras)"
+    rig_text = ("" if args.rig is None else f", rig {args.rig} ({rig.cams} cameras)") + (", mono" if args.mono else "")
     title = (f"{'Old sweep, the' if quad else 'The'} disparity engine and TPNET, {args.scenes} held-out rendered scenes "
              f"of {args.width}x{args.height} (seeds {args.seed}+){rig_text}, weights "
              f"{Path(weights or infer.DEFAULT_WEIGHTS).name}")
     meta = {"bench": "network", "scenes": args.scenes, "width": args.width, "height": args.height,
-            "seed": args.seed, "passes": args.passes, "rig": args.rig, "machine": platform.platform()}
+            "seed": args.seed, "passes": args.passes, "rig": args.rig, "mono": args.mono,
+            "machine": platform.platform()}
     return report_tools.publish(scenes, methods, title, OLD if quad else ENGINE, meta, args.json, args.png, log=log)
 
 

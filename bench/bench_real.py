@@ -2,8 +2,9 @@
 
 Usage: ``tpnet bench real DIR...`` - pair folders (``bench/real_pairs.py``: the ``realdata`` layout of
 ``../shared/realdata``, or Middlebury 2014 / ETH3D ``im0.png im1.png disp0GT.pfm``), or folders of them. Methods:
-"tpnet" (``tpnet process LEFT RIGHT --max-disparity N``: the pipeline as it ships, its checks on), "tpnet, no
-checks" (every tile answered: ``PipelineConfig(cross_check=False)``), and SGBM (3WAY, block 5, P1 8b^2, P2 32b^2,
+"tpnet" (``tpnet process LEFT RIGHT --max-disparity N``: the pipeline as it ships, its checks on, TPNET where
+weights fit), "engine" (the same with ``--method engine``: no network), "tpnet, no checks" (every tile answered:
+``PipelineConfig(cross_check=False)``), and SGBM (3WAY, block 5, P1 8b^2, P2 32b^2,
 uniqueness 5, disp12MaxDiff 1, ``bench/peers.py``), all on the images' luma. Scored per tile (the tile grid in
 the left image; GT = half-sine-weighted mean of the window's GT, "fronto" = GT spread <= 1 px; SGBM's map sampled
 the same way) - coverage, share > 1 px off (strict, and either-surface: within 1 px of >= 10 % of the window's
@@ -27,7 +28,7 @@ from tpnet_gpu.bench import common, peers
 from tpnet_gpu.bench import real_pairs as rp
 
 log = common.logger("real")
-TILE_METHODS = ("tpnet", "tpnet, no checks", "SGBM")
+TILE_METHODS = ("tpnet", "engine", "tpnet, no checks", "SGBM")
 PIXEL_METHODS = ("tpnet per pixel", "tpnet tile cells", "SGBM")
 
 
@@ -58,7 +59,7 @@ def run_pair(pair: rp.Pair, backend: str | None, device: str) -> dict:
     frames, rig = inputs.frames, inputs.rig
     (height, width) = frames.padded
     out = {"size": frames.size}
-    for name, config in (("tpnet", PipelineConfig()),
+    for name, config in (("tpnet", PipelineConfig()), ("engine", PipelineConfig(network=False, textures=False)),
                          ("tpnet, no checks", PipelineConfig(cross_check=False, per_pixel=False, textures=False))):
         pipeline = Pipeline(height, width, cfa=None, rig=rig, min_disparity=0.0, max_disparity=pair.max_disparity,
                             device=device, backend=backend, config=config)

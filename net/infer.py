@@ -56,11 +56,19 @@ def lags(path=None) -> tuple:
     return tuple(tuple(lag) for lag in recipe(path).get("lags", QUAD_LAGS))
 
 
-def shipped_for(rig_lags) -> Path | None:
-    """The shipped weights (``WEIGHTS_DIR/*.pt``) trained for these layer lags, or None: the default quad weights
-    first, then the others by name."""
+def shipped_for(rig_lags, colours: int | None = None) -> Path | None:
+    """The shipped weights (``WEIGHTS_DIR/*.pt``) trained for these layer lags - and, given ``colours``, on frames
+    of that many colours (1: mono) - or None: the default quad weights first, then the others by name."""
     others = sorted(p for p in WEIGHTS_DIR.glob("*.pt") if p != DEFAULT_WEIGHTS)
-    return next((p for p in [DEFAULT_WEIGHTS, *others] if p.exists() and lags_match(lags(p), rig_lags)), None)
+    return next((p for p in [DEFAULT_WEIGHTS, *others] if p.exists() and lags_match(lags(p), rig_lags)
+                 and (colours is None or fits_colours(p, colours))), None)
+
+
+def fits_colours(path, colours: int) -> bool:
+    """Whether the weights at ``path`` were trained on frames of ``colours`` colours (weights from before the
+    colour record fit any)."""
+    trained = correlation(path).colour_weights
+    return trained is None or len(trained) == colours
 
 
 def correlation(path=None):

@@ -235,7 +235,9 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
             torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch + 1,
                         "history": history, "config": asdict(config), "pass_targets": pass_targets}, checkpoint)
     rig_arg = "" if manifest["spec"].get("rig") is None else f" --rig {_rig_argument(manifest['spec']['rig'])}"
-    recipe = {"command": f"tpnet dataset {data_folder} --scenes {manifest['spec']['scenes']}{rig_arg} && "
+    mono_arg = (" --mono" if "cfa" in manifest["spec"] and manifest["spec"]["cfa"] is None else "") + (
+        " --photo" if manifest["spec"].get("photo") else "")
+    recipe = {"command": f"tpnet dataset {data_folder} --scenes {manifest['spec']['scenes']}{rig_arg}{mono_arg} && "
                          f"tpnet train {data_folder}{rig_arg} --epochs {config.epochs} --batch {config.batch} "
                          f"--seed {config.seed} "
                          f"--error-scale {config.error_scale or 0} --random-weight "

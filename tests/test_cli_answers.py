@@ -75,3 +75,16 @@ def test_bad_answer_options_are_one_line(photo_pair, tmp_path, capsys, option, v
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_method_engine_says_so(photo_pair, tmp_path, capsys):
+    """``--method engine`` runs no network and says so on its closing line; with ``--weights`` it is refused in one
+    line naming the weights, and nothing is written."""
+    assert main(["process", *photo_pair, "--max-disparity", "12", "--out", str(tmp_path / "e"), "--no-figures",
+                 "--method", "engine"]) == 0
+    assert "disparity engine" in capsys.readouterr().out.splitlines()[-1]
+    assert main(["process", *photo_pair, "--max-disparity", "12", "--out", str(tmp_path / "w"), "--method",
+                 "engine", "--weights", str(tmp_path / "any.pt")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "weights" in err, err
+    assert not (tmp_path / "w").exists()

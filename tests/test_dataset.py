@@ -156,3 +156,46 @@ def test_no_scenes_is_a_one_line_error_and_no_folder(tmp_path, capsys):
     with pytest.raises(ValueError, match="spec.scenes: expected at least 1 scene, got 0"):
         dataset.build(tmp_path / "lib", DatasetSpec(scenes=0, width=64, height=48), device="cpu", progress=False)
     assert not (tmp_path / "lib").exists()
+
+
+def test_mono_data_set_has_one_colour(tmp_path):
+    """``tpnet dataset --mono``: one-colour frames and layers (the processors that made them read mono frames),
+    correlation settings of one colour weight, and the spec in the manifest; a mono spec of three weights is
+    refused naming the field."""
+    from tpnet_gpu import cli  # noqa: PLC0415
+
+    assert cli.main(["dataset", str(tmp_path), "--rig", "binocular", "--mono", "--scenes", "2", "--width", "64",
+                     "--height", "48", "--supersample", "1", "--test-fraction", "0.5", "--seed", "4",
+                     "--device", "cpu"]) == 0
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert manifest["spec"]["cfa"] is None and manifest["spec"]["colour_weights"] == [1.0]
+    chunk = dataset.load(tmp_path, "train")[0]
+    assert chunk["layers_random"].shape == (6, 8, 1, 9, 9)
+    spec = DatasetSpec(**{k: tuple(v) if isinstance(v, list) else v for k, v in manifest["spec"].items()})
+    assert spec.correlation().colour_weights == (1.0,)
+    engine, processor, _ = dataset.measurers(spec, "cpu")
+    assert engine.tp.colours == processor.colours == 1
+    with pytest.raises(ValueError, match="colour_weights"):
+        DatasetSpec(cfa=None)  # three colour weights for one colour
+
+
+def test_photo_data_set_stores_8_bit_photographs(tmp_path, capsys):
+    """``--mono --photo``: the stored frames are what an image pair gives (0..255, black level 0) and re-measure to
+    the stored layers (oracle: ``remeasure`` from those frames equals the build's layers); --photo without
+    --mono, or a Bayer spec with photo, is refused naming the option."""
+    from tpnet_gpu import cli  # noqa: PLC0415
+
+    assert cli.main(["dataset", str(tmp_path / "p"), "--rig", "binocular", "--mono", "--photo", "--scenes", "1",
+                     "--width", "64", "--height", "48", "--supersample", "1", "--test-fraction", "0",
+                     "--device", "cpu"]) == 0
+    chunk = dataset.load(tmp_path / "p", "train")[0]
+    assert chunk["black_level"] == 0 and chunk["raws"].max() <= 255 and chunk["raws"].max() > 100
+    manifest = json.loads((tmp_path / "p" / "manifest.json").read_text())
+    spec = DatasetSpec(**{k: tuple(v) if isinstance(v, list) else v for k, v in manifest["spec"].items()})
+    assert spec.photo
+    again = dataset.remeasure(chunk, chunk["target_random"], *dataset.measurers(spec, "cpu"))
+    np.testing.assert_array_equal(again, chunk["layers_random"])
+    assert cli.main(["dataset", str(tmp_path / "q"), "--photo", "--scenes", "1"]) == 2
+    assert "--photo" in capsys.readouterr().err and not (tmp_path / "q").exists()
+    with pytest.raises(ValueError, match="photo"):
+        DatasetSpec(photo=True)

@@ -121,3 +121,18 @@ def test_the_pipeline_measures_rendered_rigs(name, max_gross, max_rmse):
     stats = flat_stats(rendered, result.disparity)
     assert stats["tiles"] > 300 and stats["coverage"] >= 0.95
     assert stats["gross"] <= max_gross and stats["rmse_inliers"] <= max_rmse, stats
+
+
+def test_network_off_runs_the_engine_alone():
+    """``PipelineConfig(network=False)`` (``tpnet process --method engine``): no weights even where shipped ones
+    fit the rig (the quad's), and weights given with it, or a non-bool, are refused naming the field."""
+    from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415
+
+    on = Pipeline(48, 64, cfa="GRBG", backend="warp", config=PipelineConfig(textures=False))
+    off = Pipeline(48, 64, cfa="GRBG", backend="warp", config=PipelineConfig(textures=False, network=False))
+    assert on.weights == infer.DEFAULT_WEIGHTS and off.weights is None and off.model is None
+    with pytest.raises(ValueError, match="weights"):
+        Pipeline(48, 64, cfa="GRBG", backend="warp", weights=infer.DEFAULT_WEIGHTS,
+                 config=PipelineConfig(textures=False, network=False))
+    with pytest.raises(ValueError, match="network"):
+        PipelineConfig(network="no")

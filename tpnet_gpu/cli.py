@@ -92,7 +92,7 @@ def _process(args: argparse.Namespace, step) -> int:
                                  max_disparity=max_d, weights=args.weights, device=args.device, backend=backend,
                                  two_surface=args.two_surface, cross_check=False if args.no_checks else None,
                                  min_confidence=args.min_confidence, keep_fraction=args.keep_fraction,
-                                 per_pixel=True if args.per_pixel else None)
+                                 per_pixel=True if args.per_pixel else None, network=args.method == "tpnet")
         step("frame")
         result = pipeline.process(frames.frames)
     seconds = time.perf_counter() - start
@@ -170,8 +170,11 @@ def _cmd_dataset(args: argparse.Namespace) -> int:
         from tpnet_gpu import rigfile  # noqa: PLC0415
 
         rig = rigfile.rig_to_dict(rigfile.load(args.rig))
+    if args.photo and not args.mono:
+        raise ValueError("--photo: finishes mono frames as photographs; expected --mono with it")
+    colour = {"cfa": None, "colour_weights": (1.0,), "photo": args.photo} if args.mono else {}
     spec = DatasetSpec(scenes=args.scenes, width=args.width, height=args.height, test_fraction=args.test_fraction,
-                       seed=args.seed, supersample=args.supersample, rig=rig)
+                       seed=args.seed, supersample=args.supersample, rig=rig, **colour)
     start = time.perf_counter()
     from tpnet_gpu.cli_ray import options  # noqa: PLC0415
 
@@ -271,6 +274,9 @@ def build_parser() -> argparse.ArgumentParser:
     proc.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     proc.add_argument("--backend", choices=BACKENDS, default=None, help=BACKEND_HELP)
     proc.add_argument("--weights", default=None, metavar="FILE", help=WEIGHTS_HELP)
+    proc.add_argument("--method", choices=("tpnet", "engine"), default="tpnet",
+                      help="tpnet: the disparity engine, then TPNET where weights fit the rig and frames (default); "
+                           "engine: the engine alone (to see what the network adds)")
     proc.add_argument("--no-figures", action="store_true", help=NO_FIGURES_HELP)
     proc.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP + "; never an input's folder")
     proc.add_argument("--two-surface", action="store_true", help="also foreground.tif, background.tif and "
@@ -313,6 +319,12 @@ def build_parser() -> argparse.ArgumentParser:
     data.add_argument("--rig", default=None, metavar="FILE",
                       help="render the scenes with this rig (a rig file, docs/rig_file.md, or a shipped one: quad, "
                            "binocular, two_quads; default the quad); its layers are one per direction group")
+    data.add_argument("--mono", action="store_true",
+                      help="mono cameras (grey frames, as `tpnet process LEFT.png RIGHT.png` reads images): weights "
+                           "trained on it run on image pairs; default Bayer raw frames")
+    data.add_argument("--photo", action="store_true",
+                      help="with --mono: frames finished as ordinary 8-bit photographs (per camera a random gain, "
+                           "tone curve, blur and JPEG)")
     data.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     data.set_defaults(func=_cmd_dataset)
 

@@ -136,6 +136,19 @@ class DatasetSpec:
     # the rig the scenes are rendered with: a rig file's fields (docs/rig_file.md, ``rigfile.rig_to_dict``);
     # None: the quad (``Rig()``). An ideal rig takes the spec's size; a calibrated one must have it.
     rig: dict | None = None
+    # the cameras' Bayer pattern, or None: mono frames (grey images; ``colour_weights`` then has one value)
+    cfa: str | None = tables.DEFAULT_CFA
+    # mono frames finished as ordinary photographs (scenes.image_pairs.finish_raws: per camera a random gain,
+    # tone curve, blur and JPEG, 8 bits gamma-encoded - what `tpnet process LEFT.png RIGHT.png` reads)
+    photo: bool = False
+
+    def __post_init__(self):
+        colours = 1 if self.cfa is None else 3
+        if len(self.colour_weights) != colours:
+            raise ValueError(f"colour_weights: expected {colours} value(s) for cfa {self.cfa!r}, got "
+                             f"{tuple(self.colour_weights)} (mono frames: colour_weights=(1.0,))")
+        if self.photo and self.cfa is not None:
+            raise ValueError(f"photo: finishes mono frames as photographs; expected cfa None, got {self.cfa!r}")
 
     def variants(self) -> tuple:
         """Names of the target variants each chunk holds."""

@@ -70,9 +70,15 @@ def build_scene(index: int, spec: DatasetSpec, engine, processor, layers) -> dic
     (:func:`measurers` makes all three)."""
     rig = spec_rig(spec)
     rng = np.random.default_rng([spec.seed, index])
-    rendered = render(random_scene(rig, rng), rig, sensor=Sensor(), supersample=spec.supersample,
+    rendered = render(random_scene(rig, rng), rig, sensor=Sensor(cfa=spec.cfa), supersample=spec.supersample,
                       seed=int(rng.integers(2**31)))
-    frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level
+    raws, black = rendered.raws, rendered.sensor.black_level
+    if spec.photo:  # ordinary 8-bit photographs (gamma, JPEG), as image pairs come
+        from tpnet_gpu.scenes.image_pairs import PhotoFinish, finish_raws  # noqa: PLC0415
+
+        finishes = [PhotoFinish.draw(rng) for _ in range(rig.cams)]
+        raws, black = finish_raws(raws, black, rendered.sensor.white_level, finishes), 0
+    frames = raws.astype(np.float32) - black
     gt = rendered.tile_disparity.astype(np.float64)
     shape = gt.shape
     heuristic = engine.run(frames).disparity.cpu().numpy().astype(np.float64)
@@ -87,7 +93,7 @@ def build_scene(index: int, spec: DatasetSpec, engine, processor, layers) -> dic
         targets[f"near{i}"] = gt + np.where(rng.random(shape) < 0.5, -size, size)
     out = {"gt_disparity": gt.astype(np.float32), "gt_confidence": rendered.tile_confidence,
            "gt_spread": rendered.tile_spread, "gt_surfaces": rendered.tile_surfaces.astype(np.float32),
-           "measured": measured, "raws": rendered.raws, "black_level": np.int32(rendered.sensor.black_level),
+           "measured": measured, "raws": raws, "black_level": np.int32(black),
            "scene": np.int32(index)}
     for name, target in targets.items():
         out[f"target_{name}"] = target.astype(np.float32)
@@ -104,11 +110,11 @@ def measurers(spec: DatasetSpec, device: str | None = None):
     from tpnet_gpu.processor import TileProcessor  # noqa: PLC0415
 
     rig = spec_rig(spec)
-    engine = DisparityEngine(spec.height, spec.width, rig=rig, device=device)
+    engine = DisparityEngine(spec.height, spec.width, rig=rig, cfa=spec.cfa, device=device)
     tp = engine.tp
     processor = (tp if spec.correlation().resolved(tp.colours) == tp.config else
                  TileProcessor(spec.height, spec.width, camera_offsets=rig.offsets_array(), pairs=tp.pairs,
-                               config=spec.correlation(), device=device))
+                               cfa=spec.cfa, config=spec.correlation(), device=device))
     return engine, processor, NetworkLayers(rig.offsets, processor.pairs, processor.torch_device)
 
 

@@ -43,7 +43,8 @@ class PipelineConfig:
     """``engine``: the disparity engine's settings; ``network_passes``: TPNET passes (when the pipeline has
     weights for its rig), each re-correlating at the previous one's disparity; ``textures``: make the RGBA
     texture; ``two_surface``: also fit both surfaces of tiles whose correlation shows two
-    (``FrameResult.surfaces``, tpnet_gpu/disparity/two_surface.py).
+    (``FrameResult.surfaces``, tpnet_gpu/disparity/two_surface.py); ``network``: False runs the engine alone
+    (no TPNET even where weights fit the rig: ``tpnet process --method engine``).
 
     Which answers come out (disparity.md §8): ``cross_check`` - the engine runs again with another camera as the
     reference and a tile whose answers disagree by more than ``checks.CROSS_CHECK_PX``, or whose windows leave
@@ -65,10 +66,13 @@ class PipelineConfig:
     min_confidence: float = 0.0
     keep_fraction: float = 1.0
     per_pixel: bool | None = None
+    network: bool = True
 
     def __post_init__(self):
         if not isinstance(self.network_passes, int) or self.network_passes < 1:
             raise ValueError(f"network_passes: expected an int >= 1, got {self.network_passes!r}")
+        if not isinstance(self.network, bool):
+            raise ValueError(f"network: expected True or False, got {self.network!r}")
         for name in ("cross_check", "per_pixel"):
             if not (getattr(self, name) is None or isinstance(getattr(self, name), bool)):
                 raise ValueError(f"{name}: expected True, False or None (automatic), got {getattr(self, name)!r}")
@@ -166,7 +170,9 @@ class Pipeline:
         self._near = torch.zeros(self.grid, dtype=torch.bool, device=self.device)
         self._scratch = torch.zeros_like(self._near)
         self.layers = NetworkLayers(self.engine.rig.offsets, tp.pairs, self.device)
-        self.weights = self._weights(weights, tp.colours)
+        if not config.network and weights is not None:
+            raise ValueError(f"weights: {weights} given with PipelineConfig(network=False), which runs no network")
+        self.weights = self._weights(weights, tp.colours) if config.network else None
         self._checks(height, width, cfa, pairs, engine_config, device, backend)
         if self.weights is not None:
             net_config = infer.correlation(self.weights)
@@ -211,12 +217,12 @@ class Pipeline:
                                  f"{[list(v) for v in infer.lags(weights)]}; this pipeline's rig has {lags} "
                                  f"(train weights for it: `tpnet dataset --rig` then `tpnet train`)")
             trained = infer.correlation(weights).colour_weights
-            if not _fits_colours(weights, colours):
+            if not infer.fits_colours(weights, colours):
                 raise ValueError(f"weights: {weights} were trained on frames of {len(trained)} colours; these "
                                  f"frames have {colours} (cfa None: mono)")
             return Path(weights)
-        found = infer.shipped_for(self.layers.lags)
-        if found is None or not _fits_colours(found, colours):
+        found = infer.shipped_for(self.layers.lags, colours)
+        if found is None:
             log.warning("no shipped TPNET weights for this rig (layer lags %s) and %d-colour frames: the disparity "
                         "is the engine's", lags, colours)
             return None
@@ -331,13 +337,6 @@ def _most_confident(keep: torch.Tensor, confidence: torch.Tensor, tiebreak: torc
     out = torch.zeros_like(keep).reshape(-1)
     out[index[order[:take]]] = True
     return out.reshape(keep.shape)
-
-
-def _fits_colours(weights, colours: int) -> bool:
-    """Whether the weights were trained on frames of ``colours`` colours (weights from before the colour record
-    fit any)."""
-    trained = infer.correlation(weights).colour_weights
-    return trained is None or len(trained) == colours
 
 
 @dataclass(frozen=True)

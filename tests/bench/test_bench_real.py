@@ -88,11 +88,12 @@ def test_bench_real_on_tsukuba(tmp_path, capsys):
     report = json.loads(out.read_text())
     assert "Per tile" in capsys.readouterr().out
     tiles, pixels = report["pooled"]["tiles"], report["pooled"]["pixels_masked"]
-    assert set(tiles) == {"tpnet", "tpnet, no checks", "SGBM"}
+    assert set(tiles) == {"tpnet", "engine", "tpnet, no checks", "SGBM"}
     # Middlebury's GT (integer steps on tsukuba): sub-pixel on fronto tiles, few gross answers, the checks only
     # remove answers, per-pixel bad 2.0 near the published range of local methods
     assert tiles["tpnet"]["fronto_median"] < 0.3 and tiles["tpnet"]["gross"] < 0.2
     assert tiles["tpnet"]["coverage"] <= tiles["tpnet, no checks"]["coverage"]
+    assert tiles["engine"]["fronto_median"] < 0.3 and tiles["engine"]["gross"] < 0.2  # --method engine
     assert pixels["tpnet per pixel"]["bad2"] < 0.12
     assert (tmp_path / "figs" / "tsukuba.png").stat().st_size > 10_000
 

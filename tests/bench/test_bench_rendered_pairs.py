@@ -22,7 +22,7 @@ from tpnet_gpu.bench import real_pairs as rp
 from tpnet_gpu.bench import rendered_pairs as suite
 
 SIZE = (96, 64)  # width, height
-TILE_METHODS = {"tpnet", "tpnet, no checks", "SGBM"}
+TILE_METHODS = {"tpnet", "engine", "tpnet, no checks", "SGBM"}
 PIXEL_METHODS = {"tpnet per pixel", "tpnet tile cells", "SGBM"}
 
 

@@ -173,6 +173,29 @@ def test_bench_network_binocular(tmp_path, capsys):
     assert "were trained for layer lags ((1.0, 0.0), (0.0, 1.0)" in capsys.readouterr().err
 
 
+def test_bench_network_mono(tmp_path, capsys):
+    """``--mono``: mono frames and one-colour weights (the recipe's colour weights say so); Bayer weights are
+    refused by the parser naming --weights."""
+    from tpnet_gpu.net.model import TPNet  # noqa: PLC0415
+
+    weights = tmp_path / "mono.pt"
+    torch.save(TPNet(layers=1).state_dict(), weights)
+    spec = {"colour_weights": [1.0], "fat_zero": 1e4, "cfa": None}
+    weights.with_suffix(".json").write_text(json.dumps({"lags": [[1.0, 0.0]], "dataset_spec": spec}))
+    argv = ["--scenes", "1", "--passes", "1", "--height", "64", "--width", "64", "--png", "", "--rig", "binocular",
+            "--mono", "--weights", str(weights)]
+    report, _, _ = run_bench(bench_network, argv, tmp_path, capsys)
+    assert "mono" in report["table"][0] and report["mono"] is True
+    _check_accuracy(report, {"engine", "engine (LMA)"})
+    bayer = tmp_path / "bayer.pt"
+    torch.save(TPNet(layers=1).state_dict(), bayer)
+    bayer.with_suffix(".json").write_text(json.dumps({"lags": [[1.0, 0.0]], "dataset_spec": {**spec, "colour_weights":
+                                                                                           [0.0, 0.0, 1.0]}}))
+    with pytest.raises(SystemExit):
+        bench_network.main([*argv[:-1], str(bayer)])
+    assert "--weights" in capsys.readouterr().err
+
+
 def test_bench_network_limits(tmp_path, capsys):
     from tpnet_gpu.bench import bench_network_limits as limits
 

@@ -267,3 +267,29 @@ def test_write_pair_refuses_a_disparity_beyond_16_bits(tmp_path):
     with pytest.raises(ValueError, match="^pair: a disparity over 1024 px"):
         write_pair(far, tmp_path / "far", max_disparity=2000)
     assert not (tmp_path / "far").exists()
+
+
+def test_finish_raws_follows_the_tone_curve():
+    """Oracle: 255 (gain x)^(gamma / 2.2), rounded, of a linear ramp x (black 64, white 4095), per camera; a blur
+    lowers the gradient energy and keeps the linear mean (1 %); JPEG moves pixels but not the mean (1 DN)."""
+    from tpnet_gpu.scenes.image_pairs import PhotoFinish, finish_raws
+
+    x = np.linspace(0.0, 1.0, 64 * 48).reshape(48, 64)
+    raws = np.stack([np.round(64 + x * (4095 - 64))] * 2).astype(np.uint16)
+    linear = (raws[0].astype(np.float64) - 64) / (4095 - 64)
+    out = finish_raws(raws, 64, 4095, [PhotoFinish(), PhotoFinish(gain=1.5, gamma=1.2)])
+    assert out.dtype == np.uint16 and out.max() <= 255
+    np.testing.assert_array_equal(out[0], np.round(255 * linear ** (1 / 2.2)))
+    np.testing.assert_array_equal(out[1], np.round(255 * np.clip(1.5 * linear, 0, 1) ** (1.2 / 2.2)))
+    rng = np.random.default_rng(0)
+    texture = np.round(64 + rng.uniform(0.2, 0.6, (2, 48, 64)) * 4000).astype(np.uint16)
+    plain, blurred, jpeg = (finish_raws(texture, 64, 4095, [f, f]).astype(np.float64)
+                            for f in (PhotoFinish(), PhotoFinish(blur_px=1.0), PhotoFinish(jpeg_quality=75)))
+    energy = lambda a: (np.diff(a, axis=-1) ** 2).mean()  # noqa: E731
+    linear_mean = lambda a: ((a / 255) ** 2.2).mean()  # noqa: E731 - the blur acts on the linear signal
+    assert energy(blurred) < 0.5 * energy(plain) and linear_mean(blurred) == pytest.approx(linear_mean(plain), rel=0.01)
+    assert (jpeg != plain).mean() > 0.5 and abs(jpeg.mean() - plain.mean()) < 1.0
+    draws = [PhotoFinish.draw(np.random.default_rng(s)) for s in range(200)]
+    assert all(0.7 <= d.gain <= 1.3 and 0.85 <= d.gamma <= 1.15 and 0 <= d.blur_px <= 0.8 for d in draws)
+    assert 0.3 < np.mean([d.blur_px > 0 for d in draws]) < 0.7
+    assert 0.5 < np.mean([d.jpeg_quality is not None for d in draws]) < 0.8

@@ -141,3 +141,20 @@ def test_rendered_surfaces_of_a_slanted_plane():
     np.testing.assert_allclose(s[..., 0, 2] - s[..., 0, 1], out.tile_spread[1:-1, 1:-1], rtol=1e-5)
     gt = out.tile_disparity[1:-1, 1:-1]
     assert np.all((s[..., 0, 1] <= gt + 1e-5) & (gt - 1e-5 <= s[..., 0, 2])) and out.tile_spread.min() > 0.5
+
+
+def test_mono_sensor_records_the_luminance():
+    """Oracle: Rec. 709 luminance (0.2126 R + 0.7152 G + 0.0722 B) of a flat colour, through the sensor's exposure
+    and black level (noise off); a Bayer sensor records each pixel's own colour instead."""
+    from tpnet_gpu.scenes.render import expose  # noqa: PLC0415
+
+    rgb = np.array([0.8, 0.3, 0.1])
+    planes = np.broadcast_to(rgb[:, None, None], (3, 4, 6)).copy()
+    sensor = Sensor(cfa=None)
+    span = sensor.white_level - sensor.black_level
+    mono = expose(planes, sensor, None)
+    luma = 0.2126 * 0.8 + 0.7152 * 0.3 + 0.0722 * 0.1
+    assert mono.shape == (4, 6) and (mono == round(luma * sensor.exposure * span + sensor.black_level)).all()
+    bayer = expose(planes, Sensor(cfa="GRBG"), None)  # row 0: G R G R ..., row 1: B G B G ...
+    assert bayer[0, 1] == round(0.8 * sensor.exposure * span + sensor.black_level)
+    assert bayer[1, 0] == round(0.1 * sensor.exposure * span + sensor.black_level)

@@ -110,6 +110,43 @@ def _jpeg(image: np.ndarray, quality: int) -> np.ndarray:
         return np.asarray(im.convert("L")).copy()
 
 
+@dataclass(frozen=True)
+class PhotoFinish:
+    """How ``finish_raws`` turns a mono camera's linear frame into an ordinary 8-bit image: ``gain`` (exposure
+    over the render's), ``gamma`` (exponent on the sRGB-like curve x^(1/2.2); 1 = that curve), ``blur_px`` (extra
+    Gaussian sigma), ``jpeg_quality`` (None = none)."""
+
+    gain: float = 1.0
+    gamma: float = 1.0
+    blur_px: float = 0.0
+    jpeg_quality: int | None = None
+
+    @classmethod
+    def draw(cls, rng: np.random.Generator) -> PhotoFinish:
+        """A random camera of an ordinary stereo pair: gain 0.7-1.3, gamma 0.85-1.15, blur 0-0.8 px on half the
+        cameras, JPEG quality 70-98 on 2 in 3 (one draw per camera)."""
+        return cls(gain=float(rng.uniform(0.7, 1.3)), gamma=float(rng.uniform(0.85, 1.15)),
+                   blur_px=float(rng.uniform(0.0, 0.8)) if rng.random() < 0.5 else 0.0,
+                   jpeg_quality=int(rng.integers(70, 99)) if rng.random() < 2 / 3 else None)
+
+
+def finish_raws(raws: np.ndarray, black_level: int, white_level: int, finishes) -> np.ndarray:
+    """Mono raws ``(cams, H, W)`` (linear, black level included) -> ``(cams, H, W)`` uint16 holding 0..255, each
+    camera finished by its ``PhotoFinish``: blur, gain, tone curve, 8 bits, JPEG - what ``tpnet process`` reads
+    from a PNG or JPEG pair (gamma-encoded, 8-bit), black level 0."""
+    from scipy import ndimage  # noqa: PLC0415
+
+    out = np.empty(raws.shape, dtype=np.uint16)
+    for cam, finish in enumerate(finishes):
+        linear = (raws[cam].astype(np.float64) - black_level) / (white_level - black_level)
+        if finish.blur_px > 0:
+            linear = ndimage.gaussian_filter(linear, finish.blur_px, mode="reflect")
+        tone = np.clip(linear * finish.gain, 0.0, 1.0) ** (finish.gamma / 2.2)
+        image = np.round(tone * 255.0).astype(np.uint8)
+        out[cam] = image if finish.jpeg_quality is None else _jpeg(image, finish.jpeg_quality)
+    return out
+
+
 def _left_truth(scene: Scene, rig: Rig, right_rig: Rig) -> tuple[np.ndarray, np.ndarray]:
     """Left-view GT disparity ``(H, W)`` (NaN sky) and the non-occlusion mask, at the pixel centres."""
     height, width = rig.height, rig.width

@@ -52,14 +52,15 @@ class Optics:
 @dataclass(frozen=True)
 class Sensor:
     """Sensor model: ``bits`` of output, ``black_level`` (DN), reflectance 1 maps to ``exposure`` of the range
-    above black; ``full_well`` electrons at the white level (photon noise); ``read_noise`` (DN, Gaussian)."""
+    above black; ``full_well`` electrons at the white level (photon noise); ``read_noise`` (DN, Gaussian);
+    ``cfa``: the Bayer pattern, or None for a mono sensor (each pixel the luminance of R, G, B)."""
 
     bits: int = 12
     black_level: int = 64
     exposure: float = 0.7
     full_well: float = 12000.0
     read_noise: float = 2.0
-    cfa: str = tables.DEFAULT_CFA
+    cfa: str | None = tables.DEFAULT_CFA
 
     @property
     def white_level(self) -> int:
@@ -71,7 +72,7 @@ class Rendered:
     """A rendered scene.
 
     Attributes:
-        raws: ``(cams, H, W)`` uint16 raw mosaics (``sensor.cfa``), black level included.
+        raws: ``(cams, H, W)`` uint16 raw mosaics (``sensor.cfa``; mono: luminance), black level included.
         disparity: ``(H, W)`` float32 ground-truth disparity of every virtual-camera pixel (0 for the sky).
         objects: ``(H, W)`` int16 index of the object each virtual-camera pixel sees (-1 sky).
         tile_disparity: ``(tiles_y, tiles_x)`` disparity at each tile centre (8 tx + 4, 8 ty + 4).
@@ -150,11 +151,15 @@ def apply_optics(planes: np.ndarray, optics: Optics, principal: np.ndarray) -> n
 
 
 def expose(planes: np.ndarray, sensor: Sensor, rng: np.random.Generator | None) -> np.ndarray:
-    """Mosaic ``(3, H, W)`` R G B reflectance into the CFA, add photon and read noise (if ``rng``), quantise."""
+    """Mosaic ``(3, H, W)`` R G B reflectance into the CFA (a mono sensor: their luminance), add photon and read
+    noise (if ``rng``), quantise."""
     _, height, width = planes.shape
-    colour = tables.cfa_colour_index(sensor.cfa, height, width)  # 0 R, 1 B, 2 G
-    rgb_index = np.array([0, 2, 1])[colour]  # project colour order -> R G B plane index
-    mosaic = np.take_along_axis(planes, rgb_index[None], axis=0)[0].astype(np.float64)
+    if sensor.cfa is None:
+        mosaic = np.tensordot(LUMA, planes, axes=1).astype(np.float64)
+    else:
+        colour = tables.cfa_colour_index(sensor.cfa, height, width)  # 0 R, 1 B, 2 G
+        rgb_index = np.array([0, 2, 1])[colour]  # project colour order -> R G B plane index
+        mosaic = np.take_along_axis(planes, rgb_index[None], axis=0)[0].astype(np.float64)
     span = sensor.white_level - sensor.black_level
     signal = np.clip(mosaic, 0, None) * sensor.exposure * span  # DN above black
     if rng is not None:
