@@ -323,8 +323,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="mono cameras (grey frames, as `tpnet process LEFT.png RIGHT.png` reads images): weights "
                            "trained on it run on image pairs; default Bayer raw frames")
     data.add_argument("--photo", action="store_true",
-                      help="with --mono: frames finished as ordinary 8-bit photographs (per camera a random gain, "
-                           "tone curve, blur and JPEG)")
+                      help="with --mono: frames made like ordinary 8-bit photographs (a random lens per scene; per "
+                           "camera a random gain, tone curve, blur and JPEG)")
     data.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     data.set_defaults(func=_cmd_dataset)
 

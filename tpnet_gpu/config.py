@@ -138,8 +138,9 @@ class DatasetSpec:
     rig: dict | None = None
     # the cameras' Bayer pattern, or None: mono frames (grey images; ``colour_weights`` then has one value)
     cfa: str | None = tables.DEFAULT_CFA
-    # mono frames finished as ordinary photographs (scenes.image_pairs.finish_raws: per camera a random gain,
-    # tone curve, blur and JPEG, 8 bits gamma-encoded - what `tpnet process LEFT.png RIGHT.png` reads)
+    # mono frames made like ordinary photographs: a random lens per scene (scenes.image_pairs.photo_optics), and
+    # per camera a random gain, tone curve, blur and JPEG, 8 bits gamma-encoded (finish_raws) - what
+    # `tpnet process LEFT.png RIGHT.png` reads
     photo: bool = False
 
     def __post_init__(self):

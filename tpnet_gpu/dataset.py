@@ -29,7 +29,7 @@ import torch
 
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import DatasetSpec  # noqa: F401 - DatasetSpec re-exported
-from tpnet_gpu.scenes import Sensor, random_scene, render
+from tpnet_gpu.scenes import Optics, Sensor, random_scene, render
 
 log = logging.getLogger(__name__)
 
@@ -70,12 +70,16 @@ def build_scene(index: int, spec: DatasetSpec, engine, processor, layers) -> dic
     (:func:`measurers` makes all three)."""
     rig = spec_rig(spec)
     rng = np.random.default_rng([spec.seed, index])
-    rendered = render(random_scene(rig, rng), rig, sensor=Sensor(cfa=spec.cfa), supersample=spec.supersample,
-                      seed=int(rng.integers(2**31)))
+    scene, seed = random_scene(rig, rng), int(rng.integers(2**31))
+    optics = Optics()
+    if spec.photo:  # photographs are sharper or blurrier than the renderer's lens: one lens per scene
+        from tpnet_gpu.scenes.image_pairs import PhotoFinish, finish_raws, photo_optics  # noqa: PLC0415
+
+        optics = photo_optics(rng)
+    rendered = render(scene, rig, optics=optics, sensor=Sensor(cfa=spec.cfa), supersample=spec.supersample,
+                      seed=seed)
     raws, black = rendered.raws, rendered.sensor.black_level
     if spec.photo:  # ordinary 8-bit photographs (gamma, JPEG), as image pairs come
-        from tpnet_gpu.scenes.image_pairs import PhotoFinish, finish_raws  # noqa: PLC0415
-
         finishes = [PhotoFinish.draw(rng) for _ in range(rig.cams)]
         raws, black = finish_raws(raws, black, rendered.sensor.white_level, finishes), 0
     frames = raws.astype(np.float32) - black

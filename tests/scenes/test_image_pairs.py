@@ -293,3 +293,13 @@ def test_finish_raws_follows_the_tone_curve():
     assert all(0.7 <= d.gain <= 1.3 and 0.85 <= d.gamma <= 1.15 and 0 <= d.blur_px <= 0.8 for d in draws)
     assert 0.3 < np.mean([d.blur_px > 0 for d in draws]) < 0.7
     assert 0.5 < np.mean([d.jpeg_quality is not None for d in draws]) < 0.8
+
+
+def test_photo_optics_stay_in_their_ranges():
+    """Oracle: the documented ranges (sigma 0.15-0.6 px on axis, corner up to 0.3 px more, lateral colour 0-0.6)."""
+    from tpnet_gpu.scenes.image_pairs import photo_optics
+
+    lenses = [photo_optics(np.random.default_rng(s)) for s in range(100)]
+    assert all(0.15 <= o.sigma_centre <= 0.6 and 0 <= o.sigma_edge - o.sigma_centre <= 0.3 and 0 <= o.lateral_ca <= 0.6
+               for o in lenses)
+    assert np.ptp([o.sigma_centre for o in lenses]) > 0.3  # they vary

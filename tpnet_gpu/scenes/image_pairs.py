@@ -130,6 +130,13 @@ class PhotoFinish:
                    jpeg_quality=int(rng.integers(70, 99)) if rng.random() < 2 / 3 else None)
 
 
+def photo_optics(rng: np.random.Generator) -> Optics:
+    """A random lens for photograph-like data: PSF sigma 0.15-0.6 px on axis, up to 0.3 px more at the corner,
+    lateral colour 0-0.6 px (the renderer's default lens: 0.5, 0.9, 0.6)."""
+    centre = float(rng.uniform(0.15, 0.6))
+    return Optics(centre, centre + float(rng.uniform(0.0, 0.3)), float(rng.uniform(0.0, 0.6)))
+
+
 def finish_raws(raws: np.ndarray, black_level: int, white_level: int, finishes) -> np.ndarray:
     """Mono raws ``(cams, H, W)`` (linear, black level included) -> ``(cams, H, W)`` uint16 holding 0..255, each
     camera finished by its ``PhotoFinish``: blur, gain, tone curve, 8 bits, JPEG - what ``tpnet process`` reads
