@@ -3,7 +3,8 @@
 Per scene (one compressed NPZ chunk) and per target variant, every tile's network layers ``(G, 9, 9)``
 (float16; one per direction group of the rig's pairs, ``tpnet_gpu.net.layers``: the quad's 4), its target
 disparity, and the ground truth (disparity at the tile centre, confidence, spread). The scenes are rendered with
-the spec's rig (``DatasetSpec.rig``, default the quad); the manifest keeps it and its layer lags.
+the spec's rig (``DatasetSpec.rig``, default the quad) and cameras (``cfa``: Bayer, or None for mono; ``photo``:
+mono frames made like 8-bit photographs, network.md §14); the manifest keeps the spec and the layer lags.
 Variants (network.md §6): ``heuristic`` - targets from the disparity engine (``tpnet_gpu.disparity``, as the
 pipeline runs it; tiles it cannot measure, ``measured`` False, get ground truth + a random offset); ``random`` - ground truth + a uniform offset in
 +-``random_offset`` px; ``near0``, ``near1``, ... (``near_draws`` of them) - ground truth + an offset of
