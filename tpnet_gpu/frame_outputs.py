@@ -102,8 +102,11 @@ def map_panels(maps: FrameMaps, what: str, *, low: float | None = None, high: fl
 
     return {
         "disparity": Panel(maps.disparity, f"disparity: {what}", "disparity", "px", "turbo", low, high),
-        "confidence": Panel(maps.confidence, "confidence: disparity engine", "correlation peak strength",
-                            "unitless", "magma", 0.0),
+        # where the per-pixel check ran, a tile's confidence is the share of its window backing it (disparity.md §10)
+        "confidence": (Panel(maps.confidence, "confidence: per-pixel check", "share of the window backing the answer",
+                             "0..1", "magma", 0.0, 1.0) if maps.measured is not None else
+                       Panel(maps.confidence, "confidence: disparity engine", "correlation peak strength",
+                             "unitless", "magma", 0.0)),
         "depth": Panel(pointcloud.depth(maps.disparity, maps.rig), f"depth: {what}", "depth Z", "m", "turbo_r",
                        log=True),
     }
