@@ -71,6 +71,7 @@ def run_pair(pair: rp.Pair, backend: str | None, device: str) -> dict:
         out[name] = {"tiles": frames.crop_tiles(host(result.disparity)),
                      "confidence": frames.crop_tiles(host(result.confidence)), "seconds": seconds}
         if result.pixels_measured is not None:  # every tile's answer and confidence, before the floor drops any
+            # (the engine's answers where too few pixels were measured: the pipeline's own without weights)
             ranked = tile_answers(result.pixels, result.pixels_measured, result.initial)
             out[name]["ranked"] = tuple(frames.crop_tiles(host(t)) for t in ranked)
         if result.pixels is not None:
@@ -107,11 +108,11 @@ def score_pair(pair: rp.Pair, maps: dict) -> tuple[dict, dict]:
                                                either)
         if conf is None:  # no ranking: its own answers are its "most confident" at its coverage
             scores["tiles"][name]["gross_at_coverage"] = scores["tiles"][name]["gross"]
-        arrays[name] = (m["tiles"], conf if conf is not None else np.ones_like(m["tiles"]), either,
-                        *m.get("ranked", (m["tiles"], conf if conf is not None else np.ones_like(m["tiles"]))))
+        own = (m["tiles"], conf if conf is not None else np.ones_like(m["tiles"]))
+        ranked = m.get("ranked", own)  # every answer before the confidence floor, where the result has them
+        arrays[name] = (*own, either, *ranked)
         if "ranked" in m:
-            ranked_tiles, ranked_conf = m["ranked"]
-            scores["tiles"][name]["gross_at_coverage"] = rp.gross_at_coverage(ranked_tiles, truth, ranked_conf, sg_cov)
+            scores["tiles"][name]["gross_at_coverage"] = rp.gross_at_coverage(ranked[0], truth, ranked[1], sg_cov)
     pixel_maps = {"tpnet per pixel": maps["tpnet"]["pixels"], "tpnet tile cells": cells(maps["tpnet"]["tiles"],
                   maps["size"]), "SGBM": maps["SGBM"]["pixels"]}
     scored = np.isfinite(pair.gt) if pair.mask is None else np.isfinite(pair.gt) & pair.mask

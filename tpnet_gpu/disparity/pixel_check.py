@@ -12,21 +12,25 @@ Each tile then answers the half-sine-weighted mean of that map over its window -
 least ``MIN_MEASURED`` of the window's weight; elsewhere the engine's answer stands - and its confidence is the
 share of the window's weight whose measured pixels agree with the answer within ``AGREE_PX``: how much of the
 window backs it. A tile under ``MIN_SUPPORT`` has no value by default. On the six real pairs of
-``../shared/realdata`` this ranking leaves 9.5 % of tiles > 1 px off at OpenCV SGBM's coverage (SGBM 15.5 %;
+``../shared/realdata`` this ranking leaves 9.4 % of tiles > 1 px off at OpenCV SGBM's coverage (SGBM 15.5 %;
 the tile cross-check's ranking 17.1 %), docs/results.md §2.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
+from tpnet_gpu import tables
 from tpnet_gpu.layout import TILE_SIZE, TILE_STRIDE
 
 LEFT_RIGHT_PX = 1.0  # px: a pixel whose match answers back further than this is not measured
 AGREE_PX = 1.0  # px: a measured pixel this close to the tile's answer backs it
 MIN_MEASURED = 0.2  # share of a window's weight: measured pixels below this leave the engine's answer
 MIN_SUPPORT = 0.02  # share of a window's weight backing the answer: a tile below this has no value by default
+# (256,) the tile window's weights, row-major: the processor's half-sine in each direction
+WINDOW = np.outer(tables.half_sine(np.arange(TILE_SIZE)), tables.half_sine(np.arange(TILE_SIZE))).reshape(-1)
 
 
 def left_right(pixels: torch.Tensor, other: torch.Tensor, offset, tol: float = LEFT_RIGHT_PX) -> torch.Tensor:
@@ -74,12 +78,6 @@ def _windows(image: torch.Tensor) -> torch.Tensor:
     return cols.t().reshape(h // TILE_STRIDE, w // TILE_STRIDE, TILE_SIZE * TILE_SIZE)
 
 
-def _half_sine(device, dtype) -> torch.Tensor:
-    """``(256,)`` the window's weights sin(pi (i + 0.5) / 16) sin(pi (j + 0.5) / 16), row-major."""
-    s = torch.sin(torch.pi * (torch.arange(TILE_SIZE, device=device, dtype=dtype) + 0.5) / TILE_SIZE)
-    return torch.outer(s, s).reshape(-1)
-
-
 def tile_answers(filled: torch.Tensor, measured: torch.Tensor, fallback: torch.Tensor) -> tuple[torch.Tensor,
                                                                                                   torch.Tensor]:
     """Tile answers from the checked per-pixel map (module docstring). ``filled (H, W)`` the background-filled
@@ -88,7 +86,7 @@ def tile_answers(filled: torch.Tensor, measured: torch.Tensor, fallback: torch.T
     the window's weighted mean of ``filled`` where measured pixels hold ``MIN_MEASURED`` of its weight, else
     ``fallback``; and the share of the window's weight whose measured pixels lie within ``AGREE_PX`` of that
     answer (0 where the answer is NaN)."""
-    weight = _half_sine(filled.device, filled.dtype)
+    weight = torch.as_tensor(WINDOW, device=filled.device, dtype=filled.dtype)
     total = weight.sum()
     values = _windows(filled)
     known = torch.isfinite(values)
