@@ -2,13 +2,15 @@
 
 Usage: ``tpnet bench real DIR...`` - pair folders (``bench/real_pairs.py``: the ``realdata`` layout of
 ``../shared/realdata``, or Middlebury 2014 / ETH3D ``im0.png im1.png disp0GT.pfm``), or folders of them. Methods:
-"tpnet" (``tpnet process LEFT RIGHT --max-disparity N``: the pipeline as it ships, its checks on, TPNET where
-weights fit), "engine" (the same with ``--method engine``: no network), "tpnet, no checks" (every tile answered:
+"tpnet" (``tpnet process LEFT RIGHT --max-disparity N --method tpnet``: the pipeline, its checks on, TPNET
+with the weights shipped for mono pairs - on request only, so the default output is the engine's row), "engine"
+(``--method engine``: no network), "tpnet, no checks" (every tile answered:
 ``PipelineConfig(cross_check=False)``), and SGBM (3WAY, block 5, P1 8b^2, P2 32b^2,
 uniqueness 5, disp12MaxDiff 1, ``bench/peers.py``), all on the images' luma. Scored per tile (the tile grid in
 the left image; GT = half-sine-weighted mean of the window's GT, "fronto" = GT spread <= 1 px; SGBM's map sampled
 the same way) - coverage, share > 1 px off (strict, and either-surface: within 1 px of >= 10 % of the window's
-GT), fronto median, share > 1 px off among the most confident answers as many as SGBM gives (ranked over every
+GT), fronto median (and the fronto inliers' median signed error and their scatter about it: a scene's GT
+offset from its images is every method's bias, the scatter is the method's precision), share > 1 px off among the most confident answers as many as SGBM gives (ranked over every
 tile the method answers before its confidence floor: for tpnet's per-pixel check, ``pixel_check.tile_answers``
 of its result's pixels, so a default output below SGBM's coverage is ranked fairly) - and per pixel
 (bad 1.0 / bad 2.0 / avgerr on non-occluded pixels where a mask exists, no answer counted bad): the pipeline's
@@ -18,6 +20,8 @@ together. A table, JSON, and a figure per scene (left image, GT, ours, SGBM, err
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import sys
 import time
 from pathlib import Path
@@ -59,10 +63,18 @@ def run_pair(pair: rp.Pair, backend: str | None, device: str) -> dict:
     frames, rig = inputs.frames, inputs.rig
     (height, width) = frames.padded
     out = {"size": frames.size}
-    for name, config in (("tpnet", PipelineConfig()), ("engine", PipelineConfig(network=False, textures=False)),
-                         ("tpnet, no checks", PipelineConfig(cross_check=False, per_pixel=False, textures=False))):
-        pipeline = Pipeline(height, width, cfa=None, rig=rig, min_disparity=0.0, max_disparity=pair.max_disparity,
-                            device=device, backend=backend, config=config)
+    for name, config in (("tpnet", PipelineConfig(method="tpnet")),
+                         ("engine", PipelineConfig(method="engine", textures=False)),
+                         ("tpnet, no checks", PipelineConfig(cross_check=False, per_pixel=False, textures=False,
+                                                             method="tpnet"))):
+        make = functools.partial(Pipeline, height, width, cfa=None, rig=rig, min_disparity=0.0,
+                                 max_disparity=pair.max_disparity, device=device, backend=backend)
+        try:  # the network wherever weights fit these frames, those shipped on request included (mono pairs)
+            pipeline = make(config=config)
+        except ValueError as exc:  # none fit: the pipeline's default, the engine's answers
+            if not str(exc).startswith("method:"):
+                raise
+            pipeline = make(config=dataclasses.replace(config, method="auto"))
         pipeline.process(frames.frames)  # warm-up: kernels loaded, buffers touched
         start = time.perf_counter()
         result = pipeline.process(frames.frames)
@@ -129,12 +141,13 @@ def pooled(arrays: list[dict]) -> dict:
     """Scores of all pairs' tiles together, and of their pixels (all pairs, and the masked pairs only)."""
     cat = lambda key, i=None: np.concatenate([(a[key] if i is None else a[key][i]).ravel() for a in arrays])  # noqa
     truth, spread = cat("truth"), cat("spread")
+    scene = np.concatenate([np.full(a["truth"].size, i) for i, a in enumerate(arrays)])  # each scene's bias
     out = {"tiles": {}, "pixels": {}, "pixels_masked": {}}
     sg = rp.tile_scores(cat("SGBM", 0), truth, spread)["coverage"]
     for name in TILE_METHODS:
         has_conf = name != "SGBM"
         out["tiles"][name] = rp.tile_scores(cat(name, 0), truth, spread, cat(name, 1) if has_conf else None,
-                                            sg if has_conf else None, cat(name, 2))
+                                            sg if has_conf else None, cat(name, 2), scene)
         if not has_conf:
             out["tiles"][name]["gross_at_coverage"] = out["tiles"][name]["gross"]
         else:  # ranked over every answer the method has (module docstring)
@@ -187,12 +200,13 @@ def _pct(v) -> str:
 def table(per_scene: dict, pool: dict) -> list[str]:
     """Text tables: per tile and per pixel, a row per scene and method, then the pooled rows."""
     head = ["scene", "method", "coverage", "> 1 px (strict)", "> 1 px (either)", "fronto median px",
-            "> 1 px at SGBM's coverage"]
+            "fronto bias / scatter px", "> 1 px at SGBM's coverage"]
     rows = []
     for scene, scores in list(per_scene.items()) + [("pooled", pool)]:
         for name, s in scores["tiles"].items():
             rows.append([scene, name, _pct(s["coverage"]), _pct(s["gross"]), _pct(s["gross_either"]),
-                         f"{s['fronto_median']:.3f}", _pct(s["gross_at_coverage"])])
+                         f"{s['fronto_median']:.3f}", f"{s['fronto_bias']:+.3f} / {s['fronto_scatter']:.3f}",
+                         _pct(s["gross_at_coverage"])])
     lines = ["Per tile (8x8 tiles of the left image; GT = the window's half-sine mean)", ""]
     lines += common.format_table(head, rows)
     head = ["scene", "method", "mask", "coverage", "bad 1.0", "bad 2.0", "avgerr px"]

@@ -153,11 +153,13 @@ def sample_tiles(image: np.ndarray, tiles: tuple[int, int]) -> np.ndarray:
 
 
 def tile_scores(estimate: np.ndarray, truth: np.ndarray, spread: np.ndarray, confidence: np.ndarray | None = None,
-                coverage: float | None = None, either: np.ndarray | None = None) -> dict:
+                coverage: float | None = None, either: np.ndarray | None = None,
+                scene: np.ndarray | None = None) -> dict:
     """Per-tile scores of ``estimate`` (NaN = no answer; any shape) against ``truth``/``spread`` (``tile_truth``):
     coverage, share > 1 px off over the answers (strict; with ``either``, the ``either_correct`` flags, also
-    the either-surface share), fronto-tile median |error|, and - with ``confidence`` and a ``coverage`` to
-    match - the share > 1 px off among the ``coverage`` most confident scored tiles."""
+    the either-surface share), fronto-tile median |error|, its bias and scatter (``fronto_scatter``), and - with
+    ``confidence`` and a ``coverage`` to match - the share > 1 px off among the ``coverage`` most confident
+    scored tiles. ``scene``: each tile's scene (pooled scores: each scene's bias is its own; default one)."""
     scored = np.isfinite(truth)
     answered = scored & np.isfinite(estimate)
     with np.errstate(invalid="ignore"):
@@ -169,10 +171,27 @@ def tile_scores(estimate: np.ndarray, truth: np.ndarray, spread: np.ndarray, con
            if either is not None else None,
            "fronto_tiles": int(fronto.sum()),
            "fronto_median": float(np.median(err[fronto])) if fronto.any() else float("nan"),
-           "fronto_gross": float(np.mean(err[fronto] > GROSS)) if fronto.any() else float("nan")}
+           "fronto_gross": float(np.mean(err[fronto] > GROSS)) if fronto.any() else float("nan"),
+           **fronto_scatter(estimate - truth, fronto & (err <= GROSS), scene)}
     if confidence is not None and coverage is not None:
         out["gross_at_coverage"] = gross_at_coverage(estimate, truth, confidence, coverage)
     return out
+
+
+def fronto_scatter(error: np.ndarray, inliers: np.ndarray, scene: np.ndarray | None = None) -> dict:
+    """``fronto_bias``: the median signed error of the fronto tiles within 1 px (``inliers``, bool like
+    ``error``); ``fronto_scatter``: their median |error - their scene's median| (``scene``: a label per tile,
+    default one scene). A scene's GT can sit a fixed fraction of a pixel off its images (a rectification or
+    calibration offset): every method then shares that bias, and the fronto median measures it more than the
+    method - the scatter about it is the method's precision (docs/results.md §4)."""
+    scene = np.zeros(error.shape, dtype=np.int64) if scene is None else np.asarray(scene)
+    if not inliers.any():
+        return {"fronto_bias": float("nan"), "fronto_scatter": float("nan")}
+    e, s = error[inliers], scene[inliers]
+    centred = np.empty_like(e)
+    for label in np.unique(s):
+        centred[s == label] = e[s == label] - np.median(e[s == label])
+    return {"fronto_bias": float(np.median(e)), "fronto_scatter": float(np.median(np.abs(centred)))}
 
 
 def gross_at_coverage(estimate: np.ndarray, truth: np.ndarray, confidence: np.ndarray, coverage: float) -> float:

@@ -56,12 +56,24 @@ def lags(path=None) -> tuple:
     return tuple(tuple(lag) for lag in recipe(path).get("lags", QUAD_LAGS))
 
 
-def shipped_for(rig_lags, colours: int | None = None) -> Path | None:
+def shipped_for(rig_lags, colours: int | None = None, *, requested: bool = False) -> Path | None:
     """The shipped weights (``WEIGHTS_DIR/*.pt``) trained for these layer lags - and, given ``colours``, on frames
-    of that many colours (1: mono) - or None: the default quad weights first, then the others by name."""
+    of that many colours (1: mono) - or None: the default quad weights first, then the others by name. Weights
+    shipped on request only (``on_request(path)``) count where ``requested`` is True."""
     others = sorted(p for p in WEIGHTS_DIR.glob("*.pt") if p != DEFAULT_WEIGHTS)
     return next((p for p in [DEFAULT_WEIGHTS, *others] if p.exists() and lags_match(lags(p), rig_lags)
-                 and (colours is None or fits_colours(p, colours))), None)
+                 and (colours is None or fits_colours(p, colours))
+                 and (requested or on_request(p) is None)), None)
+
+
+def on_request(path) -> str | None:
+    """Why the weights at ``path`` run only when asked for (``tpnet process --method tpnet``): their recipe's
+    ``on_request`` (a measured reason), or None - the pipeline's default for the rig and frames they fit."""
+    path = Path(path)
+    if not path.with_suffix(".json").exists():
+        return None
+    reason = recipe(path).get("on_request")
+    return None if reason is None else str(reason)
 
 
 def fits_colours(path, colours: int) -> bool:

@@ -77,6 +77,17 @@ def test_bad_answer_options_are_one_line(photo_pair, tmp_path, capsys, option, v
     assert not (tmp_path / "o").exists()
 
 
+def test_method_tpnet_runs_the_mono_weights_and_says_so(photo_pair, tmp_path, capsys):
+    """An image pair runs the engine by default (the mono weights ship on request: the closing line says the
+    engine and the log says why); ``--method tpnet`` runs TPNET with them and names them."""
+    assert main(["process", *photo_pair, "--max-disparity", "12", "--out", str(tmp_path / "a"), "--no-figures"]) == 0
+    out = capsys.readouterr()
+    assert "disparity engine" in out.out.splitlines()[-1] and "on request only" in out.err
+    assert main(["process", *photo_pair, "--max-disparity", "12", "--out", str(tmp_path / "t"), "--no-figures",
+                 "--method", "tpnet"]) == 0
+    assert "TPNET, weights tpnet_binocular_mono_v1.pt" in capsys.readouterr().out.splitlines()[-1]
+
+
 def test_method_engine_says_so(photo_pair, tmp_path, capsys):
     """``--method engine`` runs no network and says so on its closing line; with ``--weights`` it is refused in one
     line naming the weights, and nothing is written."""

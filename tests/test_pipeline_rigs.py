@@ -86,6 +86,36 @@ def test_mono_frames_do_not_take_colour_trained_weights(shipped, caplog):
     assert Pipeline(H, W, rig=_rig("binocular"), device="cpu", config=NO_TEXTURES).weights == shipped["binocular"]
 
 
+def test_weights_shipped_on_request_run_only_when_asked(shipped, caplog):
+    """Mono weights whose recipe says ``on_request`` (why they are not the default): ``method="auto"`` runs the
+    engine alone and logs that reason; ``method="tpnet"`` takes them; "tpnet" where no weights fit at all is
+    refused naming the field; colour frames still take their own weights by default."""
+    shipped["binocular"].with_suffix(".json").write_text(json.dumps(
+        {"lags": [[1.0, 0.0]], "dataset_spec": {"colour_weights": [0.0, 0.0, 1.0], "fat_zero": 1e4}}))
+    mono = shipped["binocular"].with_name("tpnet_binocular_mono_test.pt")
+    torch.save(TPNet(layers=1).state_dict(), mono)
+    mono.with_suffix(".json").write_text(json.dumps({"lags": [[1.0, 0.0]], "dataset_spec": {"colour_weights": [1.0]},
+                                                     "on_request": "not better on real pairs (measured)"}))
+    bino = _rig("binocular")
+    with caplog.at_level(logging.WARNING, logger="tpnet_gpu.pipeline"):
+        auto = Pipeline(H, W, cfa=None, rig=bino, device="cpu", max_disparity=8.0, config=NO_TEXTURES)
+    assert auto.weights is None and "on request only" in caplog.text and "not better on real pairs" in caplog.text
+    asked = Pipeline(H, W, cfa=None, rig=bino, device="cpu", max_disparity=8.0,
+                     config=replace(NO_TEXTURES, method="tpnet"))
+    assert asked.weights == mono and asked.model is not None
+    assert Pipeline(H, W, rig=bino, device="cpu", config=NO_TEXTURES).weights == shipped["binocular"]
+    with pytest.raises(ValueError, match=r"method: 'tpnet' asks for the network, but no shipped weights fit"):
+        Pipeline(H, W, rig=_rig("two_quads"), device="cpu", config=replace(NO_TEXTURES, method="tpnet"))
+
+
+def test_the_shipped_mono_pair_weights_run_on_request():
+    """The shipped mono binocular weights are found only when asked for, and their recipe says why."""
+    assert infer.shipped_for(((1.0, 0.0),), 1) is None
+    found = infer.shipped_for(((1.0, 0.0),), 1, requested=True)
+    assert found is not None and found.name == "tpnet_binocular_mono_v1.pt" and "real" in infer.on_request(found)
+    assert infer.correlation(found).colour_weights == (1.0,) and infer.load(found).layers == 1
+
+
 def test_a_rig_without_weights_runs_the_engine_alone(shipped, caplog):
     rig = _rig("two_quads")
     with caplog.at_level(logging.WARNING, logger="tpnet_gpu.pipeline"):
@@ -123,16 +153,16 @@ def test_the_pipeline_measures_rendered_rigs(name, max_gross, max_rmse):
     assert stats["gross"] <= max_gross and stats["rmse_inliers"] <= max_rmse, stats
 
 
-def test_network_off_runs_the_engine_alone():
-    """``PipelineConfig(network=False)`` (``tpnet process --method engine``): no weights even where shipped ones
-    fit the rig (the quad's), and weights given with it, or a non-bool, are refused naming the field."""
+def test_method_engine_runs_the_engine_alone():
+    """``PipelineConfig(method="engine")`` (``tpnet process --method engine``): no weights even where shipped ones
+    fit the rig (the quad's), and weights given with it, or an unknown method, are refused naming the field."""
     from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415
 
     on = Pipeline(48, 64, cfa="GRBG", backend="warp", config=PipelineConfig(textures=False))
-    off = Pipeline(48, 64, cfa="GRBG", backend="warp", config=PipelineConfig(textures=False, network=False))
+    off = Pipeline(48, 64, cfa="GRBG", backend="warp", config=PipelineConfig(textures=False, method="engine"))
     assert on.weights == infer.DEFAULT_WEIGHTS and off.weights is None and off.model is None
     with pytest.raises(ValueError, match="weights"):
         Pipeline(48, 64, cfa="GRBG", backend="warp", weights=infer.DEFAULT_WEIGHTS,
-                 config=PipelineConfig(textures=False, network=False))
-    with pytest.raises(ValueError, match="network"):
-        PipelineConfig(network="no")
+                 config=PipelineConfig(textures=False, method="engine"))
+    with pytest.raises(ValueError, match=r"method: expected one of auto, tpnet, engine, got 'no'"):
+        PipelineConfig(method="no")

@@ -92,7 +92,7 @@ def _process(args: argparse.Namespace, step) -> int:
                                  max_disparity=max_d, weights=args.weights, device=args.device, backend=backend,
                                  two_surface=args.two_surface, cross_check=False if args.no_checks else None,
                                  min_confidence=args.min_confidence, keep_fraction=args.keep_fraction,
-                                 per_pixel=True if args.per_pixel else None, network=args.method == "tpnet")
+                                 per_pixel=True if args.per_pixel else None, method=args.method)
         step("frame")
         result = pipeline.process(frames.frames)
     seconds = time.perf_counter() - start
@@ -229,7 +229,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from tpnet_gpu.config import BACKENDS, DatasetSpec, TrainConfig  # noqa: PLC0415 - light: numpy only
+    from tpnet_gpu.config import BACKENDS, METHODS, DatasetSpec, TrainConfig  # noqa: PLC0415 - light: numpy only
 
     spec, train = DatasetSpec(), TrainConfig()
     parser = argparse.ArgumentParser(prog="tpnet", description=__doc__)
@@ -274,9 +274,10 @@ def build_parser() -> argparse.ArgumentParser:
     proc.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     proc.add_argument("--backend", choices=BACKENDS, default=None, help=BACKEND_HELP)
     proc.add_argument("--weights", default=None, metavar="FILE", help=WEIGHTS_HELP)
-    proc.add_argument("--method", choices=("tpnet", "engine"), default="tpnet",
-                      help="tpnet: the disparity engine, then TPNET where weights fit the rig and frames (default); "
-                           "engine: the engine alone (to see what the network adds)")
+    proc.add_argument("--method", choices=METHODS, default="auto",
+                      help="auto: the disparity engine, then TPNET where weights shipped for default use fit the rig "
+                           "and frames (default); tpnet: also weights shipped on request (mono image pairs: they do "
+                           "not beat the engine on real photographs, docs/results.md §3); engine: the engine alone")
     proc.add_argument("--no-figures", action="store_true", help=NO_FIGURES_HELP)
     proc.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP + "; never an input's folder")
     proc.add_argument("--two-surface", action="store_true", help="also foreground.tif, background.tif and "

@@ -10,6 +10,7 @@ import numpy as np
 from tpnet_gpu import tables
 
 BACKENDS = ("warp", "taichi")  # the tile processor's kernel languages
+METHODS = ("auto", "tpnet", "engine")  # what makes the disparity: PipelineConfig.method, `tpnet process --method`
 MEASURES = ("lma", "axis")  # the disparity engine's per-tile measurements
 NEAR_DRAWS = 2  # "near" training targets per scene (ground truth + a small log-uniform offset)
 

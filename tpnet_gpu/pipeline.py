@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.config import EngineConfig, TextureConfig
+from tpnet_gpu.config import METHODS, EngineConfig, TextureConfig
 from tpnet_gpu.disparity.checks import CROSS_CHECK_PX, cross_camera, cross_difference, windows_inside
 from tpnet_gpu.disparity.engine import DisparityEngine
 from tpnet_gpu.disparity.grid import grow
@@ -43,8 +43,10 @@ class PipelineConfig:
     """``engine``: the disparity engine's settings; ``network_passes``: TPNET passes (when the pipeline has
     weights for its rig), each re-correlating at the previous one's disparity; ``textures``: make the RGBA
     texture; ``two_surface``: also fit both surfaces of tiles whose correlation shows two
-    (``FrameResult.surfaces``, tpnet_gpu/disparity/two_surface.py); ``network``: False runs the engine alone
-    (no TPNET even where weights fit the rig: ``tpnet process --method engine``).
+    (``FrameResult.surfaces``, tpnet_gpu/disparity/two_surface.py); ``method`` (``tpnet process --method``):
+    "auto" runs TPNET where weights shipped for default use fit the rig and frames, else the engine alone
+    (logged); "tpnet" also takes the weights shipped on request (their recipe's ``on_request`` says why they
+    are not the default; ValueError where none fit); "engine" runs the engine alone (to see what TPNET adds).
 
     Which answers come out (disparity.md §8): ``cross_check`` - the engine runs again with another camera as the
     reference and a tile whose answers disagree by more than ``checks.CROSS_CHECK_PX``, or whose windows leave
@@ -66,13 +68,13 @@ class PipelineConfig:
     min_confidence: float = 0.0
     keep_fraction: float = 1.0
     per_pixel: bool | None = None
-    network: bool = True
+    method: str = "auto"
 
     def __post_init__(self):
         if not isinstance(self.network_passes, int) or self.network_passes < 1:
             raise ValueError(f"network_passes: expected an int >= 1, got {self.network_passes!r}")
-        if not isinstance(self.network, bool):
-            raise ValueError(f"network: expected True or False, got {self.network!r}")
+        if self.method not in METHODS:
+            raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {self.method!r}")
         for name in ("cross_check", "per_pixel"):
             if not (getattr(self, name) is None or isinstance(getattr(self, name), bool)):
                 raise ValueError(f"{name}: expected True, False or None (automatic), got {getattr(self, name)!r}")
@@ -170,9 +172,9 @@ class Pipeline:
         self._near = torch.zeros(self.grid, dtype=torch.bool, device=self.device)
         self._scratch = torch.zeros_like(self._near)
         self.layers = NetworkLayers(self.engine.rig.offsets, tp.pairs, self.device)
-        if not config.network and weights is not None:
-            raise ValueError(f"weights: {weights} given with PipelineConfig(network=False), which runs no network")
-        self.weights = self._weights(weights, tp.colours) if config.network else None
+        if config.method == "engine" and weights is not None:
+            raise ValueError(f"weights: {weights} given with PipelineConfig(method='engine'), which runs no network")
+        self.weights = self._weights(weights, tp.colours) if config.method != "engine" else None
         self._checks(height, width, cfa, pairs, engine_config, device, backend)
         if self.weights is not None:
             net_config = infer.correlation(self.weights)
@@ -221,7 +223,17 @@ class Pipeline:
                 raise ValueError(f"weights: {weights} were trained on frames of {len(trained)} colours; these "
                                  f"frames have {colours} (cfa None: mono)")
             return Path(weights)
-        found = infer.shipped_for(self.layers.lags, colours)
+        asked = self.config.method == "tpnet"
+        found = infer.shipped_for(self.layers.lags, colours, requested=asked)
+        if found is None and asked:
+            raise ValueError(f"method: 'tpnet' asks for the network, but no shipped weights fit this rig (layer lags "
+                             f"{lags}) and {colours}-colour frames (train them: `tpnet dataset --rig` then "
+                             f"`tpnet train`, and pass --weights)")
+        kept = infer.shipped_for(self.layers.lags, colours, requested=True) if found is None else None
+        if kept is not None:
+            log.warning("TPNET weights for this rig and %d-colour frames ship on request only (--method tpnet, "
+                        "%s): %s; the disparity is the engine's", colours, kept.name, infer.on_request(kept))
+            return None
         if found is None:
             log.warning("no shipped TPNET weights for this rig (layer lags %s) and %d-colour frames: the disparity "
                         "is the engine's", lags, colours)

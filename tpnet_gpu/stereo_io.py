@@ -287,7 +287,7 @@ def make_pipeline(height: int, width: int, *, cfa: str | None, rig: Rig, min_dis
     """The pipeline for frames of ``height`` x ``width`` from ``rig`` (any camera count; ``max_disparity`` None:
     the engine's default from the rig; ``weights`` None: the shipped ones for the rig, ``Pipeline``;
     ``two_surface``: also both surfaces of two-surface tiles; ``answers``: ``PipelineConfig``'s
-    ``cross_check``, ``min_confidence``, ``keep_fraction``, ``per_pixel``, ``network``)."""
+    ``cross_check``, ``min_confidence``, ``keep_fraction``, ``per_pixel``, ``method``)."""
     from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415 - torch, Warp and the model on use
 
     config = PipelineConfig(two_surface=two_surface, **answers)

@@ -52,6 +52,20 @@ def test_scores_count_by_hand():
     assert p["avgerr"] == pytest.approx(1.0)
 
 
+def test_fronto_scatter_removes_each_scenes_own_bias():
+    # two scenes whose GT sits +0.3 / -0.2 px off: fronto inliers 0.3 + (-0.1, 0, 0.1) and -0.2 + (-0.05, 0,
+    # 0.05); the 2.0 px tile is no inlier, the NaN no answer, the spread-3 tile not fronto. By hand: scatter =
+    # median |-0.1, 0, 0.1, -0.05, 0, 0.05| = 0.05; bias = median of the six signed errors = (-0.15 + 0.2) / 2
+    truth = np.zeros(9)
+    spread = np.array([0.5] * 8 + [3.0])
+    error = np.array([0.2, 0.3, 0.4, -0.25, -0.2, -0.15, 2.0, np.nan, 0.1])
+    scene = np.array([0, 0, 0, 1, 1, 1, 1, 1, 1])
+    s = rp.tile_scores(error, truth, spread, scene=scene)
+    assert s["fronto_scatter"] == pytest.approx(0.05) and s["fronto_bias"] == pytest.approx(0.025)
+    one = rp.tile_scores(error, truth, spread)  # as one scene: |e - 0.025| -> median (0.225 + 0.275) / 2
+    assert one["fronto_scatter"] == pytest.approx(0.25)
+
+
 def test_either_surface_accepts_either_side_of_an_edge():
     gt = np.full((32, 32), 5.0)
     gt[:, 16:] = 20.0  # tile 1's window (x 4..19) sees 12 columns of 5 and 4 of 20
