@@ -39,6 +39,13 @@ def test_demo_writes_pictures_and_report(tmp_path, capsys):
     np.testing.assert_allclose(tifffile.imread(tmp_path / "error.tif"), tifffile.imread(tmp_path / "disparity.tif")
                                - tifffile.imread(tmp_path / "ground_truth.tif"), atol=1e-6)
     assert "![comparison](comparison.png)" in (tmp_path / "report.md").read_text()
+    # run again: the demo refreshes its own output; a folder that also holds another file is refused, untouched
+    argv = ["demo", "--out", str(tmp_path), "--width", "160", "--height", "128", "--no-figures"]
+    assert main(argv) == 0 and json.loads((tmp_path / "report.json").read_text())["files"]
+    (tmp_path / "notes.txt").write_text("mine")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert main(argv) == 2 and "holds files" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before and (tmp_path / "notes.txt").read_text() == "mine"
 
 
 @pytest.mark.slow

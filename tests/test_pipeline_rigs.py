@@ -126,6 +126,18 @@ def test_a_rig_without_weights_runs_the_engine_alone(shipped, caplog):
     torch.testing.assert_close(result.disparity, result.initial, equal_nan=True, rtol=0, atol=0)
 
 
+def test_every_shipped_weights_file_is_one_the_pipeline_loads():
+    """The wheel carries only weights the pipeline picks for some rig and frames (by default or on request):
+    each ``*.pt`` is the first match for its own lags and colour count; its recipe (JSON) keeps the history."""
+    files = sorted(infer.WEIGHTS_DIR.glob("*.pt"))
+    assert infer.DEFAULT_WEIGHTS in files and len(files) >= 3
+    for path in files:
+        colours = len(infer.correlation(path).colour_weights or (0, 0, 1))
+        picked = {infer.shipped_for(infer.lags(path), colours, requested=asked) for asked in (False, True)}
+        assert path in picked, (path.name, picked)
+        assert path.with_suffix(".json").is_file(), path.name
+
+
 def test_the_shipped_binocular_weights_are_found():
     found = infer.shipped_for(((1.0, 0.0),))
     assert found is not None and found.name == "tpnet_binocular_v1.pt"

@@ -38,13 +38,15 @@ def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int =
              backend: str | None = None, weights=None, figures: bool = True, overwrite: bool = False,
              progress: bool = True) -> dict:
     """Render the demo scene, run the pipeline (with ``weights``: TPNET weights from ``tpnet train``; default the
-    shipped ones), write the files and the report into ``out`` (whole or not at all; a non-empty ``out`` only
-    with ``overwrite``: ``tpnet_gpu.outputs``); ``figures`` False: no matplotlib figures. Returns the report."""
+    shipped ones), write the files and the report into ``out`` (whole or not at all; a folder holding anything
+    but an earlier demo's output only with ``overwrite``: ``outputs``, ``demo_report.is_demo_output``); ``figures`` False: no matplotlib figures. Returns the report."""
     from tpnet_gpu import demo_report  # noqa: PLC0415 - heavy imports on use
     from tpnet_gpu.camera import Rig
     from tpnet_gpu.pipeline import Pipeline
     from tpnet_gpu.scenes import Sensor, demo_scene, render
 
+    # a demo's own earlier output is refreshed; a folder of other files needs ``overwrite``
+    overwrite = overwrite or demo_report.is_demo_output(out)
     out = outputs.check(out, overwrite=overwrite)  # before the work, not after it
     rig = Rig(width=width, height=height)
     with Steps(rig.cams + 4, desc="demo", logger=log, progress=progress) as step:

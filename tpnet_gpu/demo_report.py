@@ -81,6 +81,23 @@ def _markdown(report: dict, lines: list[str], figures: bool) -> str:
     return "\n".join(md) + "\n"
 
 
+REPORT_FILES = ("report.json", "report.txt", "report.md")  # write_report's
+
+
+def is_demo_output(folder) -> bool:
+    """Whether ``folder`` holds a demo's output and nothing else: its ``report.json`` names a demo scene and every
+    entry is a file that report lists (or the report itself). ``tpnet demo`` may replace such a folder without
+    ``--overwrite``; any other file in it (or a report that does not parse) makes it someone else's."""
+    folder = Path(folder)
+    try:
+        report = json.loads((folder / "report.json").read_text())
+        listed = set(report["files"]) | set(REPORT_FILES)
+        ours = isinstance(report["scene"], str) and report["scene"].startswith("demo-")
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+    return ours and all(entry.is_file() and entry.name in listed for entry in folder.iterdir())
+
+
 def write_report(folder: Path, report: dict, *, out, figures: bool) -> str:
     """Write ``report.json``, ``report.txt`` and ``report.md`` (the table and, with ``figures``, the figures);
     returns the text report."""
