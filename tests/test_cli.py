@@ -198,8 +198,9 @@ def test_one_shot_backend_and_threads_follow_the_frame_size(tmp_path, engine):
 def test_process_rig_of_images_through_the_engine(tmp_path, engine):
     from tpnet_gpu import rigfile
     from tpnet_gpu.camera import Rig
+    from tpnet_gpu.rigfile import write_rig
 
-    rig = Rig(offsets=((-0.5, 0.0), (0.5, 0.0), (0.0, 0.75))).to_file(tmp_path / "tri.toml")
+    rig = write_rig(Rig(offsets=((-0.5, 0.0), (0.5, 0.0), (0.0, 0.75))), tmp_path / "tri.toml")
     (tmp_path / "more").mkdir()
     images = _pair(tmp_path, (16, 16)) + _pair(tmp_path / "more", (16, 16))[:1]
     assert main(["process", *images, "--rig", str(rig), "--max-disparity", "4", "--out", str(tmp_path / "o"),

@@ -1,6 +1,6 @@
 """``tpnet calibrate`` input checks and its atomic, non-clobbering rig output (tpnet_gpu/cli_calibrate.py).
 Oracles: the CLI contract (one-line ``tpnet calibrate: error: ...``, exit 2, nothing written) and the rig file read
-back (``Rig.from_file``) equal to the rig written. Break tried: the existence check of --out removed (the
+back (``rigfile.read_rig``) equal to the rig written. Break tried: the existence check of --out removed (the
 refusal test fails: the file is replaced)."""
 
 from pathlib import Path
@@ -10,6 +10,7 @@ import pytest
 from tpnet_gpu import cli
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.cli_calibrate import write_rig_atomically
+from tpnet_gpu.rigfile import read_rig
 
 
 def _run(capsys, *argv):
@@ -43,8 +44,8 @@ def test_existing_out_refused(tmp_path, capsys):
 def test_write_rig_atomically(tmp_path):
     rig = Rig(width=320, height=240, extrinsics=(1e-4,) * 13)
     out = write_rig_atomically(rig, tmp_path / "cal.json", overwrite=False, description="test")
-    assert Rig.from_file(out) == rig
+    assert read_rig(out) == rig
     with pytest.raises(ValueError, match="--out"):
         write_rig_atomically(rig, out, overwrite=False, description="test")
     write_rig_atomically(Rig(width=320, height=240), out, overwrite=True, description="test")
-    assert Rig.from_file(out).is_ideal() and sorted(p.name for p in Path(tmp_path).iterdir()) == ["cal.json"]
+    assert read_rig(out).is_ideal() and sorted(p.name for p in Path(tmp_path).iterdir()) == ["cal.json"]

@@ -117,7 +117,7 @@ def test_process_on_two_ray_workers_equals_the_serial_runs_and_resumes(local_ray
 @pytest.mark.slow
 def test_dataset_on_two_ray_workers_equals_the_serial_build_and_resumes(local_ray, tmp_path):
     dataset.build(tmp_path / "serial", SPEC, device="cpu", progress=False)
-    dataset.build(tmp_path / "ray", SPEC, device="cpu", progress=False, ray=ray_jobs.RayOptions(workers=2))
+    dataset.build(tmp_path / "ray", SPEC, device="cpu", progress=False, chunks=ray_jobs.chunk_builder(ray_jobs.RayOptions(workers=2)))
     assert (json.loads((tmp_path / "ray" / "manifest.json").read_text())
             == json.loads((tmp_path / "serial" / "manifest.json").read_text()))
     for index in range(SPEC.scenes):
@@ -130,7 +130,7 @@ def test_dataset_on_two_ray_workers_equals_the_serial_build_and_resumes(local_ra
     # resume: every chunk present, nothing rebuilt (no worker is even started)
     inodes = [p.stat().st_ino for p in sorted((tmp_path / "ray").glob("scene_*.npz"))]
     assert ray_jobs.build_chunks(tmp_path / "ray", SPEC, [], ray_jobs.RayOptions(workers=2)) == []
-    dataset.build(tmp_path / "ray", SPEC, device="cpu", progress=False, ray=ray_jobs.RayOptions(workers=2))
+    dataset.build(tmp_path / "ray", SPEC, device="cpu", progress=False, chunks=ray_jobs.chunk_builder(ray_jobs.RayOptions(workers=2)))
     assert [p.stat().st_ino for p in sorted((tmp_path / "ray").glob("scene_*.npz"))] == inodes
     assert sorted(p.name for p in (tmp_path / "ray").iterdir()) == ["manifest.json"] + [
         f"scene_{i:04d}.npz" for i in range(SPEC.scenes)]  # no temporary file left

@@ -257,19 +257,6 @@ class Rig:
         shifted = tuple(tuple(float(v) for v in row) for row in r - r[cam])
         return replace(self, offsets=shifted, _cache={})
 
-    @classmethod
-    def from_file(cls, path) -> Rig:
-        """Read a rig file, JSON or TOML (``tpnet_gpu.rigfile.read_rig``; format in docs/rig_file.md)."""
-        from tpnet_gpu.rigfile import read_rig  # noqa: PLC0415 - rigfile imports this module
-
-        return read_rig(path)
-
-    def to_file(self, path, *, description: str | None = None):
-        """Write this rig as a rig file, JSON (``.json``) or TOML (``.toml``); returns the path."""
-        from tpnet_gpu.rigfile import write_rig  # noqa: PLC0415 - rigfile imports this module
-
-        return write_rig(self, path, description=description)
-
     def to_json(self) -> dict:
         """Plain-JSON description (for scene folders)."""
         return {

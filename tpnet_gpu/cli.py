@@ -177,8 +177,10 @@ def _cmd_dataset(args: argparse.Namespace) -> int:
                        seed=args.seed, supersample=args.supersample, rig=rig, **colour)
     start = time.perf_counter()
     from tpnet_gpu.cli_ray import options  # noqa: PLC0415
+    from tpnet_gpu.ray_jobs import chunk_builder  # noqa: PLC0415
 
-    folder = build(args.out, spec, device=args.device, ray=options(args))
+    ray = options(args)
+    folder = build(args.out, spec, device=args.device, chunks=None if ray is None else chunk_builder(ray))
     print(f"data set of {spec.scenes} scenes ({spec.width}x{spec.height}) in {time.perf_counter() - start:.0f} s "
           f"-> {folder}")
     return 0

@@ -11,7 +11,7 @@ from pathlib import Path
 
 
 def write_rig_atomically(rig, out: Path, *, overwrite: bool, description: str) -> Path:
-    """Write ``rig`` (``Rig.to_file``) to a temporary file beside ``out``, then rename it into place: ``out`` is
+    """Write ``rig`` (``rigfile.write_rig``) to a temporary file beside ``out``, then rename it into place: ``out`` is
     either the old file or the whole new one. An existing ``out`` is refused without ``overwrite``."""
     if out.exists() and not overwrite:
         raise ValueError(f"--out: expected a new file (or --overwrite), got {out}, which exists")
@@ -21,7 +21,9 @@ def write_rig_atomically(rig, out: Path, *, overwrite: bool, description: str) -
     fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.tmp-", suffix=out.suffix, dir=out.parent)
     os.close(fd)
     try:
-        rig.to_file(tmp, description=description)
+        from tpnet_gpu.rigfile import write_rig  # noqa: PLC0415 - numpy and the rig on use
+
+        write_rig(rig, tmp, description=description)
         os.replace(tmp, out)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

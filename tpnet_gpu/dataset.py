@@ -168,10 +168,11 @@ def write_manifest(folder, spec: DatasetSpec) -> Path:
 
 
 def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = None, progress: bool = True,
-          ray=None) -> Path:
+          chunks=None) -> Path:
     """Build the data set into ``folder`` (one NPZ per scene + ``manifest.json``); resumes: chunks already
-    present are kept. ``ray``: a ``tpnet_gpu.ray_jobs.RayOptions`` to spread the missing scenes over Ray
-    workers (the same chunks, bit for bit), or None to build them here, one after another."""
+    present are kept. ``chunks``: a callable ``(folder, spec, indices, device=, progress=)`` that writes the
+    missing scenes' chunks elsewhere - ``ray_jobs.chunk_builder(options)`` spreads them over Ray workers (the
+    same chunks, bit for bit) - or None to build them here, one after another."""
     from tpnet_gpu.progress import bar  # noqa: PLC0415
 
     if spec.scenes < 1:
@@ -179,10 +180,8 @@ def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = Non
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     missing = [i for i in range(spec.scenes) if not chunk_path(folder, i).exists()]
-    if ray is not None:
-        from tpnet_gpu.ray_jobs import build_chunks  # noqa: PLC0415 - the ray extra, on use
-
-        build_chunks(folder, spec, missing, ray, device=device, progress=progress)
+    if chunks is not None:
+        chunks(folder, spec, missing, device=device, progress=progress)
     elif missing:
         engine, processor, layers = measurers(spec, device)
         for index in bar(missing, desc="scenes", unit="scene", progress=progress):

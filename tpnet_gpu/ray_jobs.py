@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import io
 import json
 import logging
@@ -198,6 +199,11 @@ class ChunkWorker:
             scenes.append(f"scene {int(index)}")
             seconds.append(time.perf_counter() - start)
         return {"scene": scenes, "seconds": seconds, "error": [""] * len(scenes)}
+
+
+def chunk_builder(options: RayOptions):
+    """``dataset.build``'s ``chunks``: the missing scenes written by ``build_chunks`` with these options."""
+    return functools.partial(build_chunks, options=options)
 
 
 def build_chunks(folder, spec, indices, options: RayOptions, *, device: str | None = None,

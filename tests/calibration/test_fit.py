@@ -13,6 +13,7 @@ from tpnet_gpu import cli, evaluation
 from tpnet_gpu.calibration import CalibrationConfig, Frame, calibrate, edge_misalignment, model
 from tpnet_gpu.calibration.synthetic import misalignment
 from tpnet_gpu.camera import Rig
+from tpnet_gpu.rigfile import read_rig, write_rig
 from tpnet_gpu.disparity.engine import DisparityEngine
 from tpnet_gpu.scenes import random_scene, render
 from tpnet_gpu.scenes.folder import save
@@ -41,12 +42,12 @@ def test_cli_lma_recovers_misalignment(tmp_path, capsys):
     rounds still converge, ~1/3 of the error left per round); the disparity errors return."""
     truth, rendered = _scene(2.5)
     folder = save(rendered, tmp_path / "scene", previews=False)
-    IDEAL.to_file(tmp_path / "ideal.json")
+    write_rig(IDEAL, tmp_path / "ideal.json")
     out = tmp_path / "calibrated.json"
     assert cli.main(["calibrate", str(folder), "--rig", str(tmp_path / "ideal.json"), "--out", str(out),
                      "--device", "cpu"]) == 0
     assert "calibrated 1 scene(s) by lma" in capsys.readouterr().out
-    calibrated = Rig.from_file(out)
+    calibrated = read_rig(out)
     assert edge_misalignment(IDEAL, calibrated.extrinsics, truth) < 0.25
     gross, rmse = _flat_errors(rendered, calibrated)
     gross_true, rmse_true = _flat_errors(rendered, rendered.rig)
