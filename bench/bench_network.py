@@ -33,7 +33,7 @@ import numpy as np
 import torch
 
 from tpnet_gpu.baseline.estimate import BASELINE_CORRELATION, estimate, processor_correlator
-from tpnet_gpu import rigfile
+from tpnet_gpu.io import rigfile
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import EngineConfig
 from tpnet_gpu.disparity import DisparityEngine

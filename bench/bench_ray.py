@@ -35,7 +35,7 @@ log = common.logger("bench_ray")
 SERIAL = """
 import sys
 from tpnet_gpu.cli import build_parser
-from tpnet_gpu.ray_jobs import process_scene, reused_pipelines
+from tpnet_gpu.training.ray_jobs import process_scene, reused_pipelines
 out, scenes = sys.argv[1], sys.argv[2:]
 with reused_pipelines():
     for scene in scenes:
@@ -46,7 +46,7 @@ with reused_pipelines():
 """
 START_STOP = """
 import sys
-from tpnet_gpu.ray_jobs import RayOptions, session
+from tpnet_gpu.training.ray_jobs import RayOptions, session
 with session(RayOptions(workers=int(sys.argv[1]))):
     pass
 """
@@ -79,7 +79,8 @@ def main(argv=None) -> dict:
         ((width, height),) = common.parse_sizes(args.size, "--size")
     except ValueError as error:
         parser.error(str(error))
-    from tpnet_gpu import cli, ray_jobs  # noqa: PLC0415
+    from tpnet_gpu import cli  # noqa: PLC0415
+    from tpnet_gpu.training import ray_jobs
 
     try:
         ray_jobs.import_ray()

@@ -57,7 +57,7 @@ def run_pair(pair: rp.Pair, backend: str | None, device: str) -> dict:
     """Every method's maps on one pair (host arrays cut to the image: tiles ``(ty, tx)``, pixels ``(h, w)``)."""
     from tpnet_gpu.disparity.pixel_check import tile_answers  # noqa: PLC0415 - torch and the kernels on use
     from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415
-    from tpnet_gpu.stereo_io import load_inputs  # noqa: PLC0415
+    from tpnet_gpu.io.stereo_io import load_inputs  # noqa: PLC0415
 
     inputs = load_inputs([pair.left, pair.right])  # as `tpnet process LEFT RIGHT` reads them
     frames, rig = inputs.frames, inputs.rig

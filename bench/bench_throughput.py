@@ -69,7 +69,7 @@ from tpnet_gpu import tables
 from tpnet_gpu.net import frame as net_frame
 from tpnet_gpu.net import model as net_model
 from tpnet_gpu.processor import BACKENDS, TileProcessor
-from tpnet_gpu.warp_setup import default_device, init_warp
+from tpnet_gpu.runtime.warp_setup import default_device, init_warp
 
 from . import common
 from .common import PAPER_GPU, PAPER_TP_MS

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 from hypothesis import strategies as st
 
-from tpnet_gpu import rigfile
+from tpnet_gpu.io import rigfile
 from tpnet_gpu.pipeline import Pipeline, PipelineConfig
 
 SIZES = [(32, 48), (48, 64)]

@@ -44,7 +44,7 @@ def write(case: dict, path: Path) -> Path:
     """Write ``case``'s file at ``path`` (suffix .dng or .tif) and mutate it; returns the path."""
     import tifffile  # noqa: PLC0415
 
-    from tpnet_gpu import rawio  # noqa: PLC0415
+    from tpnet_gpu.io import rawio  # noqa: PLC0415
 
     rng = np.random.default_rng(case["seed"])
     shape = (case["height"], 48)
@@ -75,7 +75,7 @@ def write(case: dict, path: Path) -> Path:
 
 def judge(case: dict, path: Path) -> str | None:
     """Read the file (in this process) and apply the oracle: None when it held, else the failure's name."""
-    from tpnet_gpu import rawio  # noqa: PLC0415
+    from tpnet_gpu.io import rawio  # noqa: PLC0415
 
     try:
         if case["kind"] == "dng":

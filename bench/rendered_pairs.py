@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tpnet_gpu import rigfile
+from tpnet_gpu.io import rigfile
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.scenes import textures as tx
 from tpnet_gpu.scenes.image_pairs import Impairments, render_pair, write_pair

@@ -25,7 +25,7 @@ MODULE = f"{__package__}.bench_throughput"  # re-run as a worker (``--taichi-wor
 def run_taichi(args, cfa, device, frames_t, target, net) -> dict:
     """The Taichi processor's stages and the network on its layers, in this process (Taichi's thread count is
     that of this process); then its outputs against a Warp processor's on the same frame."""
-    from tpnet_gpu import taichi_setup  # noqa: PLC0415 - imported by the Taichi worker only
+    from tpnet_gpu.runtime import taichi_setup  # noqa: PLC0415 - imported by the Taichi worker only
 
     tdev = target.device
     start = time.perf_counter()

@@ -13,7 +13,7 @@ import warp as wp
 
 from tpnet_gpu.kernels.frames import CENTRE_LIMIT, HALF_WINDOW, window_corner
 from tpnet_gpu.layout import PIXEL_LIMIT
-from tpnet_gpu.warp_setup import kernel_module_options
+from tpnet_gpu.runtime.warp_setup import kernel_module_options
 
 wp.set_module_options(kernel_module_options())  # hashed with every kernel source (warp_setup)
 

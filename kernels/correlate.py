@@ -13,7 +13,7 @@ Layouts: ``clt`` (tiles * cams * colours * 4, 8, 8); ``corr`` (tiles * pairs, 2r
 import warp as wp
 
 from tpnet_gpu.layout import FLOAT32_MAX
-from tpnet_gpu.warp_setup import kernel_module_options
+from tpnet_gpu.runtime.warp_setup import kernel_module_options
 
 wp.set_module_options(kernel_module_options())  # hashed with every kernel source (warp_setup)
 

@@ -5,7 +5,7 @@ Per-thread kernels (no tiles): they touch every pixel or every (tile, camera) on
 
 import warp as wp
 
-from tpnet_gpu.warp_setup import kernel_module_options
+from tpnet_gpu.runtime.warp_setup import kernel_module_options
 
 # Margin of the padded frames. Even, so padding keeps the Bayer parity; >= 17, so that *any* integer window
 # corner can be moved onto the padded frame without changing what the pair-preserving clamp reads (see

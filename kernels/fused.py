@@ -19,7 +19,7 @@ import warp as wp
 
 from tpnet_gpu.kernels.convert import convert_camera
 from tpnet_gpu.kernels.correlate import correlate_pair, zero_correlations
-from tpnet_gpu.warp_setup import kernel_module_options
+from tpnet_gpu.runtime.warp_setup import kernel_module_options
 
 wp.set_module_options(kernel_module_options())  # hashed with every kernel source (warp_setup)
 

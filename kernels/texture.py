@@ -17,7 +17,7 @@ pixel u at canvas u + 4.
 
 import warp as wp
 
-from tpnet_gpu.warp_setup import kernel_module_options
+from tpnet_gpu.runtime.warp_setup import kernel_module_options
 
 wp.set_module_options(kernel_module_options())  # hashed with every kernel source (warp_setup)
 

@@ -165,8 +165,8 @@ def train(data_folder, out_path, config: TrainConfig = TrainConfig(), *, checkpo
 
 def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: bool, log, stop_after, device,
            rig) -> dict:
-    from tpnet_gpu import dataset  # noqa: PLC0415
-    from tpnet_gpu.progress import bar as progress_bar  # noqa: PLC0415
+    from tpnet_gpu.training import dataset  # noqa: PLC0415
+    from tpnet_gpu.runtime.progress import bar as progress_bar  # noqa: PLC0415
 
     torch.manual_seed(config.seed)
     manifest = json.loads((Path(data_folder) / "manifest.json").read_text())
@@ -255,7 +255,7 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
 
 def _rig_argument(rig: dict) -> str:
     """``--rig`` for a data set's rig: the shipped example it is (at any size, when ideal), else the recipe's."""
-    from tpnet_gpu import rigfile  # noqa: PLC0415
+    from tpnet_gpu.io import rigfile  # noqa: PLC0415
 
     size = ("width", "height")
     for name, path in rigfile.examples().items():

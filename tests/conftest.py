@@ -9,7 +9,7 @@ import pytest
 def _cuda_available() -> bool:
     import warp as wp  # on use: tests that need no kernels (docs, packaging) run without Warp
 
-    from tpnet_gpu.warp_setup import init_warp
+    from tpnet_gpu.runtime.warp_setup import init_warp
 
     init_warp()
     return wp.is_cuda_available()

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-from tpnet_gpu import rawio
+from tpnet_gpu.io import rawio
 from tpnet_gpu.config import CorrelationConfig, TextureConfig
 from tpnet_gpu.processor import TileProcessor
 
@@ -184,7 +184,7 @@ def test_issue16_taichi_texture_is_bit_repeatable_with_two_threads(tmp_path):
     script = tmp_path / "texture.py"
     script.write_text(textwrap.dedent("""
         import numpy as np, torch
-        from tpnet_gpu.taichi_setup import init_taichi
+        from tpnet_gpu.runtime.taichi_setup import init_taichi
         init_taichi("cpu", threads=2)
         from tpnet_gpu.processor import TileProcessor
         rng = np.random.default_rng(1)

@@ -19,7 +19,7 @@ import tifffile
 import torch
 from PIL import Image
 
-from tpnet_gpu import rawio
+from tpnet_gpu.io import rawio
 from tpnet_gpu.cli import main
 
 
@@ -196,9 +196,9 @@ def test_one_shot_backend_and_threads_follow_the_frame_size(tmp_path, engine):
 
 
 def test_process_rig_of_images_through_the_engine(tmp_path, engine):
-    from tpnet_gpu import rigfile
+    from tpnet_gpu.io import rigfile
     from tpnet_gpu.camera import Rig
-    from tpnet_gpu.rigfile import write_rig
+    from tpnet_gpu.io.rigfile import write_rig
 
     rig = write_rig(Rig(offsets=((-0.5, 0.0), (0.5, 0.0), (0.0, 0.75))), tmp_path / "tri.toml")
     (tmp_path / "more").mkdir()
@@ -329,7 +329,7 @@ def test_issue16_render_over_an_existing_scene_needs_overwrite(tmp_path, capsys)
 def test_issue16_failed_write_leaves_the_old_output_whole(tmp_path, engine, monkeypatch, capsys):
     # Before: with texture.png a directory the command exited 2 after the other four files were written. Now
     # a non-empty folder is refused up front, and a write that fails half-way leaves the old folder as it was.
-    from tpnet_gpu import images
+    from tpnet_gpu.io import images
 
     left, right = _pair(tmp_path)
     out = tmp_path / "o"
@@ -367,7 +367,7 @@ def test_issue16_killed_run_leaves_the_old_output_whole(tmp_path):
         import os, signal, sys
         sys.path.insert(0, {str(root)!r})
         import tpnet_gpu.pipeline
-        from tpnet_gpu import images
+        from tpnet_gpu.io import images
         from tests.test_cli import RecordingEngine
         from tpnet_gpu.cli import main
         tpnet_gpu.pipeline.Pipeline = RecordingEngine

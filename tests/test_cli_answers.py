@@ -31,7 +31,8 @@ def photo_pair(tmp_path_factory):
 
 
 def test_per_pixel_files(photo_pair, tmp_path):
-    from tpnet_gpu import pointcloud, rigfile
+    from tpnet_gpu.outputs import pointcloud
+    from tpnet_gpu.io import rigfile
 
     out = tmp_path / "o"
     assert main(["process", *photo_pair, "--max-disparity", "12", "--out", str(out), "--per-pixel"]) == 0

@@ -1,4 +1,4 @@
-"""``tpnet calibrate`` input checks and its atomic, non-clobbering rig output (tpnet_gpu/cli_calibrate.py).
+"""``tpnet calibrate`` input checks and its atomic, non-clobbering rig output (tpnet_gpu/cli/calibrate.py).
 Oracles: the CLI contract (one-line ``tpnet calibrate: error: ...``, exit 2, nothing written) and the rig file read
 back (``rigfile.read_rig``) equal to the rig written. Break tried: the existence check of --out removed (the
 refusal test fails: the file is replaced)."""
@@ -9,8 +9,8 @@ import pytest
 
 from tpnet_gpu import cli
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.cli_calibrate import write_rig_atomically
-from tpnet_gpu.rigfile import read_rig
+from tpnet_gpu.cli.calibrate import write_rig_atomically
+from tpnet_gpu.io.rigfile import read_rig
 
 
 def _run(capsys, *argv):

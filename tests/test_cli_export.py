@@ -1,4 +1,4 @@
-"""``tpnet export`` (tpnet_gpu/cli_export.py): writes a valid ONNX file with the documented inputs and outputs,
+"""``tpnet export`` (tpnet_gpu/cli/export.py): writes a valid ONNX file with the documented inputs and outputs,
 refuses to clobber one, and ends bad input with one line (exit 2). Oracles: onnx's own model checker and the
 documented interface (network.md §12); the numbers are checked in tests/net/test_export.py."""
 

@@ -1,4 +1,4 @@
-"""``tpnet flow`` (tpnet_gpu/cli_flow.py). Oracle: PNG frames of a texture moved by a known sub-pixel shift per
+"""``tpnet flow`` (tpnet_gpu/cli/flow.py). Oracle: PNG frames of a texture moved by a known sub-pixel shift per
 frame (an exact Fourier shift, then 16-bit quantisation): the written flow TIFFs hold that shift; bad input is a
 one-line error with exit status 2."""
 
@@ -11,7 +11,7 @@ import tifffile
 from PIL import Image
 
 from tpnet_gpu import cli
-from tpnet_gpu.cli_flow import flow_colours
+from tpnet_gpu.cli.flow import flow_colours
 from tpnet_gpu.scenes import textures as tx
 
 STEP = (1.5, -0.5)  # px per frame

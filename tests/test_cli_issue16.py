@@ -30,7 +30,7 @@ def test_issue16_process_device_cuda_without_a_gpu_is_one_line(tmp_path, capsys)
 
 def test_issue16_out_naming_a_file_fails_before_any_work(tmp_path, monkeypatch, capsys):
     # before: refused only after 17 s of work. Oracle: the inputs are never read.
-    from tpnet_gpu import stereo_io
+    from tpnet_gpu.io import stereo_io
 
     monkeypatch.setattr(stereo_io, "load_inputs", lambda *a, **k: pytest.fail("inputs read before --out checked"))
     (tmp_path / "file").write_text("x")

@@ -1,4 +1,4 @@
-"""Data set builder (tpnet_gpu/dataset.py): chunks, split by scene, targets, and the layers equal to what the
+"""Data set builder (tpnet_gpu/training/dataset.py): chunks, split by scene, targets, and the layers equal to what the
 tile processor gives for the stored targets (oracle: a fresh TileProcessor run on the re-rendered scene)."""
 
 import json
@@ -6,8 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from tpnet_gpu import dataset
-from tpnet_gpu.dataset import DatasetSpec
+from tpnet_gpu.training import dataset
+from tpnet_gpu.training.dataset import DatasetSpec
 
 SPEC = DatasetSpec(scenes=3, width=64, height=48, test_fraction=0.34, seed=4, supersample=1)
 
@@ -106,7 +106,7 @@ def binocular(tmp_path_factory):
 
 
 def test_dataset_rig_goes_in_the_manifest(binocular):
-    from tpnet_gpu import rigfile  # noqa: PLC0415
+    from tpnet_gpu.io import rigfile  # noqa: PLC0415
 
     manifest = json.loads((binocular / "manifest.json").read_text())
     assert manifest["lags"] == [[1.0, 0.0]]
@@ -134,7 +134,7 @@ def test_binocular_layers_are_the_pairs_correlation(binocular):
 
 
 def test_calibrated_rig_of_another_size_is_refused():
-    from tpnet_gpu import rigfile  # noqa: PLC0415
+    from tpnet_gpu.io import rigfile  # noqa: PLC0415
 
     rig = rigfile.rig_to_dict(rigfile.load("binocular"))
     rig["distortion"] = [0.01] + [0.0] * 6

@@ -1,4 +1,4 @@
-"""Labelled figures (tpnet_gpu/figures.py). Oracles: the matplotlib figure handed to ``savefig`` (its titles, axis
+"""Labelled figures (tpnet_gpu/outputs/figures.py). Oracles: the matplotlib figure handed to ``savefig`` (its titles, axis
 labels, colour-bar label) and the PNG written (Pillow decodes it; its size is WIDTH_IN * DPI per column)."""
 
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 from matplotlib.figure import Figure
 from PIL import Image
 
-from tpnet_gpu import figures
+from tpnet_gpu.outputs import figures
 
 
 @pytest.fixture

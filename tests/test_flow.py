@@ -1,4 +1,4 @@
-"""Motion vectors (tpnet_gpu/flow.py). Oracles: an exact band-limited sub-pixel shift of a texture (a Fourier
+"""Motion vectors (tpnet_gpu/flow/estimator.py). Oracles: an exact band-limited sub-pixel shift of a texture (a Fourier
 shift, so the true flow is known to float precision), and rendered frames of a rig that moved (the renderer's
 geometry projects the same world points at both times: scenes.motion.tile_flow)."""
 

@@ -1,4 +1,4 @@
-"""Aligning a rig's cameras for the combined flow (tpnet_gpu/flow_align.py). Oracles: the ideal rig's geometry by
+"""Aligning a rig's cameras for the combined flow (tpnet_gpu/flow/align.py). Oracles: the ideal rig's geometry by
 hand (camera k sees the virtual camera's point c at disparity d at c - d r_k, camera.md / Rig.port_coordinates),
 and hand-made disparity maps."""
 
@@ -6,7 +6,7 @@ import numpy as np
 import torch
 
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.flow_align import Alignment, filled
+from tpnet_gpu.flow.align import Alignment, filled
 
 
 def test_filled_takes_the_neighbours_median_then_the_map_median():

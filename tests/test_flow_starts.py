@@ -1,4 +1,4 @@
-"""The flow's coarse start (tpnet_gpu/flow_starts.py). Oracles: block means written out by slicing, the nearest
+"""The flow's coarse start (tpnet_gpu/flow/starts.py). Oracles: block means written out by slicing, the nearest
 coarse tile found by brute force over the tile centres' pixel positions, and an exact Fourier shift of a texture
 beyond the full-resolution search's reach (2 x 6 px)."""
 
@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from tpnet_gpu.flow import FlowConfig, FlowEstimator
-from tpnet_gpu.flow_starts import bin_frames, coarse_size, scaled_start
+from tpnet_gpu.flow.starts import bin_frames, coarse_size, scaled_start
 from tests.test_flow import _fourier_shift
 
 

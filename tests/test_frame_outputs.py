@@ -1,4 +1,4 @@
-"""``tpnet process`` outputs (tpnet_gpu/frame_outputs.py, docs/outputs.md) on a rendered 160x120 demo scene.
+"""``tpnet process`` outputs (tpnet_gpu/outputs/frame_outputs.py, docs/outputs.md) on a rendered 160x120 demo scene.
 
 Oracles: the scene itself, ray-traced at the tile centres (``Scene.trace``: the hit's depth and 3-D point, never
 through ``Rig.distance`` or ``Rig.image_to_world``); the pinhole formula Z = f B / (d p) and its projection
@@ -169,4 +169,4 @@ def test_verbose_logs_and_no_progress_bar_off_a_terminal(processed, tmp_path, ca
     assert "INFO tpnet_gpu.pipeline: pipeline 160x120" in loud and "INFO tpnet_gpu.cli: frame" in loud
     assert "DEBUG" not in loud and "\r" not in loud
     assert main(["-vv", *argv, "--out", str(tmp_path / "louder")]) == 0
-    assert "DEBUG tpnet_gpu.frame_outputs: wrote" in capsys.readouterr().err
+    assert "DEBUG tpnet_gpu.outputs.frame_outputs: wrote" in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""Ordinary images in: ``tpnet_gpu.images.read_image`` and ``tpnet_gpu.stereo_io`` (load_stereo_pair, padding,
+"""Ordinary images in: ``tpnet_gpu.io.images.read_image`` and ``tpnet_gpu.io.stereo_io`` (load_stereo_pair, padding,
 cropping; docs/rig_file.md §6, §7).
 
 Oracles: the arrays written to tmp_path (PNG through Pillow, TIFF through tifffile) - read back exactly, in
@@ -14,8 +14,8 @@ import pytest
 import tifffile
 from PIL import Image
 
-from tpnet_gpu.images import ImageFormatError, read_image
-from tpnet_gpu.stereo_io import LUMA_WEIGHTS, load_images, load_stereo_pair, pad_frames, padded_side
+from tpnet_gpu.io.images import ImageFormatError, read_image
+from tpnet_gpu.io.stereo_io import LUMA_WEIGHTS, load_images, load_stereo_pair, pad_frames, padded_side
 
 RNG = np.random.default_rng(7)
 

@@ -125,9 +125,9 @@ def test_net_does_not_import_the_dataset_builder():
     # reading the weights and their recipe (infer) and the model need no data set; only training loads one
     for path in (ROOT / "net" / "infer.py", ROOT / "net" / "model.py"):
         text = path.read_text()
-        assert "tpnet_gpu.dataset" not in text and "from tpnet_gpu import dataset" not in text, path
+        assert "tpnet_gpu.training.dataset" not in text and "from tpnet_gpu import dataset" not in text, path
     done = subprocess.run([sys.executable, "-c", "import sys, tpnet_gpu.net.infer as i; i.correlation(); "
-                           "print(json.dumps('tpnet_gpu.dataset' in sys.modules))".replace("json.dumps", "repr")],
+                           "print(json.dumps('tpnet_gpu.training.dataset' in sys.modules))".replace("json.dumps", "repr")],
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip() == "False"

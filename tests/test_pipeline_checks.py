@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from tests.textures import fourier_shift, smooth_noise
-from tpnet_gpu import rigfile
+from tpnet_gpu.io import rigfile
 from tpnet_gpu.pipeline import Pipeline, PipelineConfig
 
 D = 13.5

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from tests.disparity.test_engine import MISALIGNED, RIGS, flat_stats, rendered_scene
-from tpnet_gpu import rigfile
+from tpnet_gpu.io import rigfile
 from tpnet_gpu.net import infer
 from tpnet_gpu.net.model import TPNet
 from tpnet_gpu.pipeline import Pipeline, PipelineConfig

@@ -1,11 +1,11 @@
-"""Depth, tile colours and the PLY writer (tpnet_gpu/pointcloud.py). Oracles: Z = f B / (d p) written out with
+"""Depth, tile colours and the PLY writer (tpnet_gpu/outputs/pointcloud.py). Oracles: Z = f B / (d p) written out with
 the quad's numbers (4.5 mm, 258 mm, 2.2 um); hand-made textures of known colours; the PLY layout read back with
 NumPy. (The outputs of a rendered scene against its ray-traced ground truth: tests/test_frame_outputs.py.)"""
 
 import numpy as np
 import pytest
 
-from tpnet_gpu import pointcloud
+from tpnet_gpu.outputs import pointcloud
 from tpnet_gpu.camera import Rig
 
 

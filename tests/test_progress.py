@@ -1,4 +1,4 @@
-"""Progress bars and the log switch (tpnet_gpu/progress.py). Oracles: a stand-in stderr that says it is (or is
+"""Progress bars and the log switch (tpnet_gpu/runtime/progress.py). Oracles: a stand-in stderr that says it is (or is
 not) a terminal and records what is written; the logging records of a ``tpnet_gpu`` logger."""
 
 import io
@@ -6,7 +6,7 @@ import logging
 
 import pytest
 
-from tpnet_gpu import progress
+from tpnet_gpu.runtime import progress
 
 
 class Terminal(io.StringIO):

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import tifffile
 
-from tpnet_gpu import rawio
-from tpnet_gpu.rawio import RawFormatError, RawFrame
+from tpnet_gpu.io import rawio
+from tpnet_gpu.io.rawio import RawFormatError, RawFrame
 
 CFAS = ("GRBG", "RGGB", "BGGR", "GBRG")
 H, W = 32, 48

@@ -1,4 +1,4 @@
-"""Many scenes on Ray (tpnet_gpu/ray_jobs.py, tpnet_gpu/cli_ray.py; issue 18): on a local Ray of 2 workers,
+"""Many scenes on Ray (tpnet_gpu/training/ray_jobs.py, tpnet_gpu/cli/ray.py; issue 18): on a local Ray of 2 workers,
 ``tpnet process --ray`` writes for every scene folder exactly the files that ``tpnet process`` writes for it alone
 (oracle: the serial command run here, scene by scene, in its own output folder; compared byte for byte, every
 TIFF's array bit for bit with NaN in the same places), and ``tpnet dataset --ray`` the same chunk arrays and
@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 import tifffile
 
-from tpnet_gpu import dataset, ray_jobs
+from tpnet_gpu.training import dataset
+from tpnet_gpu.training import ray_jobs
 from tpnet_gpu.cli import main
-from tpnet_gpu.dataset import DatasetSpec
+from tpnet_gpu.training.dataset import DatasetSpec
 
 # two scenes of one size (an actor reuses its pipeline) and one of another (a second pipeline); "d" is finished
 # before the Ray run (the resume: kept as it is, not processed again)
@@ -42,7 +43,7 @@ def test_ray_options_without_the_extra_or_without_ray_end_in_one_line(tmp_path, 
 def test_plan_skips_finished_scenes_and_refuses_bad_inputs(tmp_path):
     # no Ray needed: which scenes a run does (a present, non-empty output folder is a finished scene)
     from tpnet_gpu.cli import build_parser
-    from tpnet_gpu.cli_ray import _plan
+    from tpnet_gpu.cli.ray import _plan
 
     for name in ("a", "b", "c"):
         (tmp_path / "in" / name).mkdir(parents=True)

@@ -1,4 +1,4 @@
-"""Rig files (tpnet_gpu/rigfile.py, docs/rig_file.md) and ``Rig.referenced_to``.
+"""Rig files (tpnet_gpu/io/rigfile.py, docs/rig_file.md) and ``Rig.referenced_to``.
 
 Oracles: the ``Rig`` itself (a file written and read back compares equal field by field), the shipped examples'
 numbers as the brief and rig_file.md §4 state them, the document's own JSON and TOML examples, hand-written bad
@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tpnet_gpu import rigfile, tables
+from tpnet_gpu import tables
+from tpnet_gpu.io import rigfile
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.rigfile import RigFileError, read_rig, rig_from_dict, write_rig
+from tpnet_gpu.io.rigfile import RigFileError, read_rig, rig_from_dict, write_rig
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "rig_file.md"
 CALIBRATED = Rig(width=640, height=480, pixel_size_mm=0.003, focal_mm=6.0, baseline_mm=120.0,

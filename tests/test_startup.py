@@ -1,5 +1,5 @@
 """Start-up (docs/platform.md §4): what the light entry points import, the kernel caches a second `tpnet process`
-hits, and Taichi's quick front end (tpnet_gpu/taichi_setup.py). Oracles: ``sys.modules`` of a fresh process; the
+hits, and Taichi's quick front end (tpnet_gpu/runtime/taichi_setup.py). Oracles: ``sys.modules`` of a fresh process; the
 files of Taichi's offline cache and Warp's kernel cache (a run that compiled a kernel adds one); Taichi's own
 behaviour for class kernels and its compile errors. No timings (those are bench_startup's)."""
 
@@ -11,7 +11,7 @@ import textwrap
 import pytest
 import torch
 
-from tpnet_gpu import taichi_setup
+from tpnet_gpu.runtime import taichi_setup
 from tpnet_gpu.cli import main
 
 HEAVY = ("torch", "warp", "taichi", "scipy")
@@ -32,7 +32,7 @@ def test_package_and_help_import_no_kernel_language_or_torch():
 
 def test_reading_inputs_imports_no_kernel_language_or_renderer():
     # The inputs of `tpnet process` (scene folders, raws, images) are read before the pipeline is built.
-    assert _imported("import tpnet_gpu.stereo_io, tpnet_gpu.scenes.folder") == set()
+    assert _imported("import tpnet_gpu.io.stereo_io, tpnet_gpu.scenes.folder") == set()
 
 
 def _cache_files(root) -> set[str]:
@@ -114,7 +114,7 @@ def test_debug_mode_keeps_taichi_positions(tmp_path):
     script = tmp_path / "debug_positions.py"
     script.write_text(textwrap.dedent("""
         from taichi.lang.ast import ast_transformer_utils
-        from tpnet_gpu import taichi_setup
+        from tpnet_gpu.runtime import taichi_setup
         print(ast_transformer_utils.ASTTransformerContext.get_pos_info is taichi_setup._position)
     """))
     env = {**os.environ, "TPNET_TAICHI_DEBUG": "1"}

@@ -1,4 +1,4 @@
-"""The ``tpnet process`` inputs (tpnet_gpu/stereo_io.py, docs/rig_file.md §7, §8): which inputs make which frames
+"""The ``tpnet process`` inputs (tpnet_gpu/io/stereo_io.py, docs/rig_file.md §7, §8): which inputs make which frames
 and rig, and the one call into the pipeline (``make_pipeline``).
 
 Oracles: the files written to tmp_path (DNG mosaics through ``rawio.write_dng``, images through Pillow), the rig
@@ -12,9 +12,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from tpnet_gpu import rawio, rigfile, tables
+from tpnet_gpu import tables
+from tpnet_gpu.io import rawio
+from tpnet_gpu.io import rigfile
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.stereo_io import fit_rig, load_inputs, load_stereo_pair, make_pipeline
+from tpnet_gpu.io.stereo_io import fit_rig, load_inputs, load_stereo_pair, make_pipeline
 
 RNG = np.random.default_rng(3)
 CALIBRATED = Rig(width=40, height=24, offsets=((-0.5, 0.0), (0.5, 0.0)), distortion=(0.01,) + (0.0,) * 6)

@@ -1,4 +1,4 @@
-"""Taichi set-up (tpnet_gpu/taichi_setup.py): the offline cache folder, the CPU thread count, bad arguments.
+"""Taichi set-up (tpnet_gpu/runtime/taichi_setup.py): the offline cache folder, the CPU thread count, bad arguments.
 Oracles: the folder the cache files appear in and the thread count Taichi reports, in a fresh process."""
 
 import os
@@ -8,7 +8,7 @@ import textwrap
 
 import pytest
 
-from tpnet_gpu import taichi_setup
+from tpnet_gpu.runtime import taichi_setup
 
 
 def test_cache_dir_follows_tpnet_cache_dir(monkeypatch, tmp_path):
@@ -22,7 +22,7 @@ def test_threads_and_cache_in_a_fresh_process(tmp_path):
     script = tmp_path / "init_run.py"
     script.write_text(textwrap.dedent("""
         import taichi as ti
-        from tpnet_gpu import taichi_setup
+        from tpnet_gpu.runtime import taichi_setup
         taichi_setup.init_taichi("cpu")
         print("threads", ti.lang.impl.current_cfg().cpu_max_num_threads, taichi_setup.threads())
     """))

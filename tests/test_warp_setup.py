@@ -9,11 +9,11 @@ import textwrap
 
 import pytest
 
-from tpnet_gpu import warp_setup
+from tpnet_gpu.runtime import warp_setup
 
 SCRIPT = textwrap.dedent("""
     import warp as wp
-    from tpnet_gpu.warp_setup import init_warp
+    from tpnet_gpu.runtime.warp_setup import init_warp
     init_warp()
 
     @wp.kernel

@@ -362,7 +362,7 @@ class FrameError:
 def load_frames(paths, cfa: str | None = None) -> tuple[np.ndarray, str]:
     """Black-subtracted float32 frames ``(cams, H, W)`` and their CFA from a scene folder (one path) or one raw
     file per camera (DNG or anything LibRaw reads; TIFF needs ``cfa``)."""
-    from tpnet_gpu import rawio  # noqa: PLC0415
+    from tpnet_gpu.io import rawio  # noqa: PLC0415
     from tpnet_gpu.scenes.folder import load  # noqa: PLC0415
 
     paths = [Path(p) for p in ([paths] if isinstance(paths, (str, Path)) else paths)]

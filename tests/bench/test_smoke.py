@@ -290,7 +290,7 @@ def test_bench_startup(tmp_path, capsys):
     # Warm rows only (--cache: the environment's kernel caches), one tiny frame, the Warp backend; two runs, as a
     # second run once failed (it wrote into the first one's output folder, which `tpnet process` refuses).
     from tpnet_gpu.bench import bench_startup
-    from tpnet_gpu.taichi_setup import cache_dir
+    from tpnet_gpu.runtime.taichi_setup import cache_dir
 
     argv = ["--sizes", "32x32", "--backends", "warp", "--repeat", "2", "--cache", str(cache_dir().parent)]
     report, out, err = run_bench(bench_startup, argv, tmp_path, capsys)

@@ -13,7 +13,7 @@ from tpnet_gpu import cli, evaluation
 from tpnet_gpu.calibration import CalibrationConfig, Frame, calibrate, edge_misalignment, model
 from tpnet_gpu.calibration.synthetic import misalignment
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.rigfile import read_rig, write_rig
+from tpnet_gpu.io.rigfile import read_rig, write_rig
 from tpnet_gpu.disparity.engine import DisparityEngine
 from tpnet_gpu.scenes import random_scene, render
 from tpnet_gpu.scenes.folder import save

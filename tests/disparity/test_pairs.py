@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 import torch
 
-from tpnet_gpu import rigfile, tables
+from tpnet_gpu import tables
+from tpnet_gpu.io import rigfile
 from tpnet_gpu.disparity.pairs import (AxisSampler, combine_pairs, default_pairs, direction_groups, pair_vectors,
                                        window_overlap)
 

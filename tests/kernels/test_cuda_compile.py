@@ -1,5 +1,5 @@
 """The Warp kernels compile for CUDA (sm_90, 64 threads per block) on a machine without a GPU: Warp's bundled NVRTC
-builds the cubins (tpnet_gpu.cuda_aot). Cold, the project's modules take about a minute of two cores; cached by
+builds the cubins (tpnet_gpu.runtime.cuda_aot). Cold, the project's modules take about a minute of two cores; cached by
 Warp's module hash, a rerun takes about a second. Skipped, naming NVRTC, where Warp cannot compile for CUDA."""
 
 import importlib
@@ -7,7 +7,7 @@ import shutil
 
 import pytest
 
-from tpnet_gpu import cuda_aot
+from tpnet_gpu.runtime import cuda_aot
 
 GOOD = '''import warp as wp
 

@@ -141,7 +141,7 @@ def test_taichi_exp_matches_float64_exp():
     coefficient 0.5 -> 0.49, or n rounded towards zero (r then reaches -ln 2, outside the polynomial's range)."""
     import taichi as ti
 
-    from tpnet_gpu import taichi_setup
+    from tpnet_gpu.runtime import taichi_setup
     from tpnet_gpu.kernels import taichi_texture
     from tpnet_gpu.kernels.taichi_types import F32_1D
 

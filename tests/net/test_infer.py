@@ -60,7 +60,7 @@ def test_correlation_settings_follow_the_recipe(tmp_path):
     # the layers must be made as the weights' data set made them (oracle: the recipe's own numbers)
     import json
 
-    from tpnet_gpu.dataset import DatasetSpec
+    from tpnet_gpu.training.dataset import DatasetSpec
 
     weights = tmp_path / "w.pt"
     assert infer.correlation(weights) == DatasetSpec().correlation()  # no recipe: today's data set

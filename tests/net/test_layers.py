@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from tpnet_gpu import rigfile, tables
+from tpnet_gpu import tables
+from tpnet_gpu.io import rigfile
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.disparity.pairs import default_pairs, direction_groups
 from tpnet_gpu.net.layers import QUAD_LAGS, NetworkLayers, lags_match, rig_lags

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from tpnet_gpu import dataset
-from tpnet_gpu.dataset import DatasetSpec
+from tpnet_gpu.training import dataset
+from tpnet_gpu.training.dataset import DatasetSpec
 from tpnet_gpu.net.train import TrainConfig, relative_spread, train
 
 SPEC = DatasetSpec(scenes=3, width=64, height=48, test_fraction=0.34, seed=9, supersample=1)
@@ -126,7 +126,7 @@ def test_pass_samples_are_re_measured_at_the_models_output(data):
 def test_a_binocular_data_set_trains_a_one_layer_network(tmp_path):
     """The network has one layer per direction group of the data set's rig (binocular: 1); the recipe records
     the rig and its lags; ``rig`` must be the data set's (oracle: the lags of the shipped rig files)."""
-    from tpnet_gpu import rigfile  # noqa: PLC0415
+    from tpnet_gpu.io import rigfile  # noqa: PLC0415
 
     spec = DatasetSpec(scenes=2, width=64, height=48, test_fraction=0.5, seed=9, supersample=1,
                        rig=rigfile.rig_to_dict(rigfile.load("binocular")))

@@ -78,7 +78,7 @@ def step_env(args) -> dict:
     import torch
     import warp as wp
 
-    from tpnet_gpu.warp_setup import init_warp
+    from tpnet_gpu.runtime.warp_setup import init_warp
 
     init_warp()
     smi = shutil.which("nvidia-smi")
@@ -97,7 +97,7 @@ def step_env(args) -> dict:
 COMPILE_ONE = """
 import sys, time
 import warp as wp
-from tpnet_gpu.warp_setup import init_warp
+from tpnet_gpu.runtime.warp_setup import init_warp
 from tpnet_gpu.layout import CPU_BLOCK_DIM, CUDA_BLOCK_DIM
 from tpnet_gpu.processor import warp_backend
 init_warp()

@@ -112,7 +112,7 @@ class DisparityEngine:
                  textures: bool = False):
         if rig is not None and not isinstance(rig, Rig):  # a rig file's name is for rigfile.load (issue 16 fuzz)
             raise TypeError(f"rig: expected a tpnet_gpu.Rig or None, got {type(rig).__name__} {rig!r} "
-                            "(a rig file or shipped name: tpnet_gpu.rigfile.load)")
+                            "(a rig file or shipped name: tpnet_gpu.io.rigfile.load)")
         self.rig = rig if rig is not None else Rig(width=width, height=height)
         if (self.rig.width, self.rig.height) != (width, height):
             raise ValueError(f"rig: expected a {width}x{height} sensor, got {self.rig.width}x{self.rig.height}")

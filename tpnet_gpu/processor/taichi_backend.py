@@ -13,7 +13,8 @@ import threading
 
 import torch
 
-from tpnet_gpu import tables, taichi_setup
+from tpnet_gpu import tables
+from tpnet_gpu.runtime import taichi_setup
 from tpnet_gpu.config import CorrelationConfig, TextureConfig
 from tpnet_gpu.kernels import taichi_convert, taichi_correlate, taichi_frames, taichi_fused, taichi_texture
 from tpnet_gpu.layout import CPU_FUSED_SLOTS_PER_THREAD, CUDA_FUSED_SLOTS, NET_LAYERS, NET_SIDE

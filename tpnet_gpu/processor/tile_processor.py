@@ -37,7 +37,7 @@ from tpnet_gpu.config import CorrelationConfig, TextureConfig
 from tpnet_gpu.processor import validate
 from tpnet_gpu.processor.buffers import Buffers, TileResult
 from tpnet_gpu.processor.warp_backend import WarpBackend
-from tpnet_gpu.warp_setup import init_warp
+from tpnet_gpu.runtime.warp_setup import init_warp
 
 
 class TileProcessor:
@@ -63,7 +63,7 @@ class TileProcessor:
         device: "cpu", "cuda", "cuda:N" or such a ``torch.device``; default cuda when present (anything else, or
             CUDA where none is present, is a ``ValueError`` naming ``device``).
         backend: kernel language, "warp" or "taichi" (``kernels/taichi_*.py``: the same math, inputs and
-            outputs; on the CPU it spreads the tiles over every core, see ``tpnet_gpu.taichi_setup`` for the
+            outputs; on the CPU it spreads the tiles over every core, see ``tpnet_gpu.runtime.taichi_setup`` for the
             thread count and the offline cache). Default (None): the faster by measurement (bench_throughput,
             README): Taichi on the CPU (3.1x Warp's speed for a full frame on 2 cores), Warp on CUDA and
             wherever ``graph`` is asked for.

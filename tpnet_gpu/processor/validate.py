@@ -103,7 +103,7 @@ def device(value) -> str:
     ``torch.device`` of those ("cpu:0" is the cpu); anything else, or CUDA where none is present, is refused."""
     import warp as wp  # noqa: PLC0415 - initialised by the caller
 
-    from tpnet_gpu.warp_setup import default_device  # noqa: PLC0415
+    from tpnet_gpu.runtime.warp_setup import default_device  # noqa: PLC0415
 
     if value is None:
         return default_device()

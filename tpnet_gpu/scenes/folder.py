@@ -1,5 +1,5 @@
 """Rendered scenes on disk: the project's scene folder (one DNG per camera, ground truth as NPZ + TIFF, and
-``scene.json`` with the rig, optics and sensor), written and read through ``tpnet_gpu.rawio``."""
+``scene.json`` with the rig, optics and sensor), written and read through ``tpnet_gpu.io.rawio``."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from tpnet_gpu import rawio
+from tpnet_gpu.io import rawio
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.images import colour_ramp, raw_preview, save_png
+from tpnet_gpu.io.images import colour_ramp, raw_preview, save_png
 from tpnet_gpu.scenes.render import Rendered, window_surfaces
 
 

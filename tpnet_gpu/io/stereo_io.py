@@ -19,7 +19,7 @@ import numpy as np
 
 from tpnet_gpu import tables
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.images import ImageData, read_image
+from tpnet_gpu.io.images import ImageData, read_image
 from tpnet_gpu.layout import TILE_SIZE, TILE_STRIDE
 
 COLOURS = ("luma", "mean", "green")
@@ -155,7 +155,7 @@ def _raw_bits(white: float) -> int | None:
 
 
 def _raw_frames(paths, cfa: str | None) -> Frames:
-    from tpnet_gpu import rawio  # noqa: PLC0415 - rawpy on use
+    from tpnet_gpu.io import rawio  # noqa: PLC0415 - rawpy on use
 
     frames = rawio.read_frames(paths, cfa=cfa)
     stack = rawio.stack_normalised(frames)
@@ -165,7 +165,7 @@ def _raw_frames(paths, cfa: str | None) -> Frames:
 
 
 def _scene_frames(folder: Path) -> tuple[Frames, Rig]:
-    from tpnet_gpu import rawio  # noqa: PLC0415
+    from tpnet_gpu.io import rawio  # noqa: PLC0415
     from tpnet_gpu.scenes.folder import load  # noqa: PLC0415
 
     scene = load(folder)
@@ -239,7 +239,7 @@ def load_inputs(paths, *, rig=None, cfa: str | None = None, colour: str = "luma"
         ValueError: a count or kind of inputs that fits none of these (the message says what would), a rig that
             does not fit them; FileNotFoundError, ImageFormatError, RawFormatError, RigFileError from reading.
     """
-    from tpnet_gpu import rigfile  # noqa: PLC0415
+    from tpnet_gpu.io import rigfile  # noqa: PLC0415
 
     paths = [Path(p) for p in ([paths] if isinstance(paths, (str, Path)) else paths)]
     count = len(paths)

@@ -1,5 +1,5 @@
 """Many scenes on many workers with Ray (issue 18; docs/scaling.md): scene folders through ``tpnet process`` and data
-set chunks through ``tpnet_gpu.dataset.write_chunk``, spread over a pool of Ray actors by Ray Data's
+set chunks through ``tpnet_gpu.training.dataset.write_chunk``, spread over a pool of Ray actors by Ray Data's
 ``map_batches`` (one scene per call).
 
 Each actor is one worker process that keeps what is costly to make - its pipelines or its data-set measurers, with
@@ -83,7 +83,7 @@ def run_pool(items: list[dict], worker: type, kwargs: dict, options: RayOptions,
              progress: bool = True) -> list[dict]:
     """Every item (a row of plain values) through ``worker(**kwargs)(batch)`` on a Ray actor pool, one item per
     call; returns the rows the workers return, as they finish (a progress bar counts them)."""
-    from tpnet_gpu.progress import bar as progress_bar  # noqa: PLC0415
+    from tpnet_gpu.runtime.progress import bar as progress_bar  # noqa: PLC0415
 
     if not items:
         return []
@@ -122,7 +122,7 @@ class _Pipelines:
         self.make, self.kept = make, OrderedDict()
 
     def __call__(self, height, width, *, rig, **options):
-        from tpnet_gpu.rigfile import rig_to_dict  # noqa: PLC0415
+        from tpnet_gpu.io.rigfile import rig_to_dict  # noqa: PLC0415
 
         key = (height, width, json.dumps(rig_to_dict(rig), sort_keys=True), json.dumps(options, sort_keys=True))
         if key not in self.kept:
@@ -137,7 +137,7 @@ class _Pipelines:
 def reused_pipelines() -> Iterator[None]:
     """While open, ``tpnet process`` (which makes its pipeline through ``stereo_io.make_pipeline`` on each call)
     reuses the pipelines of earlier calls in this process."""
-    from tpnet_gpu import stereo_io  # noqa: PLC0415
+    from tpnet_gpu.io import stereo_io  # noqa: PLC0415
 
     make = stereo_io.make_pipeline
     stereo_io.make_pipeline = _Pipelines(make)
@@ -183,14 +183,14 @@ class ChunkWorker:
     layers), made once."""
 
     def __init__(self, folder: str, spec: dict, device: str | None):
-        from tpnet_gpu.dataset import DatasetSpec, measurers  # noqa: PLC0415
+        from tpnet_gpu.training.dataset import DatasetSpec, measurers  # noqa: PLC0415
 
         one_thread()
         self.folder, self.spec = folder, DatasetSpec(**spec)
         self.measurers = measurers(self.spec, device)
 
     def __call__(self, batch):
-        from tpnet_gpu.dataset import write_chunk  # noqa: PLC0415
+        from tpnet_gpu.training.dataset import write_chunk  # noqa: PLC0415
 
         scenes, seconds = [], []
         for index in batch["index"]:

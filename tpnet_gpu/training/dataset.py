@@ -43,7 +43,7 @@ def spec_rig(spec: DatasetSpec) -> Rig:
     takes the spec's size; a calibrated one must already have it."""
     if spec.rig is None:
         return Rig(width=spec.width, height=spec.height)
-    from tpnet_gpu.rigfile import rig_from_dict  # noqa: PLC0415 - rigfile imports camera
+    from tpnet_gpu.io.rigfile import rig_from_dict  # noqa: PLC0415 - rigfile imports camera
 
     rig = rig_from_dict(spec.rig, "spec.rig")
     if rig.is_ideal():
@@ -141,7 +141,7 @@ def chunk_path(folder, index: int) -> Path:
 def write_chunk(folder, index: int, spec: DatasetSpec, engine, processor, layers) -> Path:
     """Scene ``index``'s chunk (:func:`build_scene`; ``engine``, ``processor``, ``layers``: :func:`measurers`),
     written whole (a temporary file renamed), unless it is there already (a resumed build). The one writer of
-    chunks: the serial build and the Ray workers (``tpnet_gpu.ray_jobs``) both call it."""
+    chunks: the serial build and the Ray workers (``tpnet_gpu.training.ray_jobs``) both call it."""
     path = chunk_path(folder, index)
     if not path.exists():
         handle, tmp = tempfile.mkstemp(prefix=f".{path.stem}.tmp-", suffix=".npz", dir=path.parent)  # unique:
@@ -173,7 +173,7 @@ def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = Non
     present are kept. ``chunks``: a callable ``(folder, spec, indices, device=, progress=)`` that writes the
     missing scenes' chunks elsewhere - ``ray_jobs.chunk_builder(options)`` spreads them over Ray workers (the
     same chunks, bit for bit) - or None to build them here, one after another."""
-    from tpnet_gpu.progress import bar  # noqa: PLC0415
+    from tpnet_gpu.runtime.progress import bar  # noqa: PLC0415
 
     if spec.scenes < 1:
         raise ValueError(f"spec.scenes: expected at least 1 scene, got {spec.scenes}")

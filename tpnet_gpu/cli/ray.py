@@ -1,5 +1,5 @@
 """``--ray`` on ``tpnet process`` and ``tpnet dataset``: many scene folders, or a data set's scenes, spread over Ray
-workers on this machine or a cluster (``tpnet_gpu.ray_jobs``, docs/scaling.md; needs the ``ray`` extra)."""
+workers on this machine or a cluster (``tpnet_gpu.training.ray_jobs``, docs/scaling.md; needs the ``ray`` extra)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def add_options(process: argparse.ArgumentParser, dataset: argparse.ArgumentPars
 
 def options(args: argparse.Namespace):
     """The run's ``RayOptions``, or None without ``--ray`` (``--address``/``--workers`` then are an error)."""
-    from tpnet_gpu.ray_jobs import RayOptions, import_ray  # noqa: PLC0415
+    from tpnet_gpu.training.ray_jobs import RayOptions, import_ray  # noqa: PLC0415
 
     if not args.ray:
         for name in ("address", "workers"):
@@ -68,7 +68,7 @@ def _plan(args: argparse.Namespace) -> tuple[list[dict], list[str]]:
 
 def process_scenes(args: argparse.Namespace) -> int:
     """``tpnet process --ray DIR...``: each scene folder through ``tpnet process`` on a Ray worker."""
-    from tpnet_gpu.ray_jobs import SceneWorker, run_pool  # noqa: PLC0415
+    from tpnet_gpu.training.ray_jobs import SceneWorker, run_pool  # noqa: PLC0415
 
     ray_options = options(args)
     if ray_options is None:

@@ -14,13 +14,12 @@ smooth).
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from tpnet_gpu.stereo_io import IMAGE_SUFFIXES, TIFF_SUFFIXES
+from tpnet_gpu.io.stereo_io import IMAGE_SUFFIXES, TIFF_SUFFIXES
 
 HELP = "per-tile motion vectors between frames: A B (scene folders, raw files or images) or a sequence folder"
 RAW_SUFFIXES = (".dng", ".cr2", ".nef", ".arw", ".raw")
@@ -81,9 +80,9 @@ def run(args: argparse.Namespace) -> int:
     import tifffile  # noqa: PLC0415 - the command's own imports on use (start-up)
 
     from tpnet_gpu.flow import FlowEstimator  # noqa: PLC0415
-    from tpnet_gpu.images import save_png  # noqa: PLC0415
+    from tpnet_gpu.io.images import save_png  # noqa: PLC0415
     from tpnet_gpu.outputs import check, output_folder  # noqa: PLC0415
-    from tpnet_gpu.stereo_io import load_frame  # noqa: PLC0415
+    from tpnet_gpu.io.stereo_io import load_frame  # noqa: PLC0415
 
     paths = sequence(args.inputs)
     init = _init(args.init)
@@ -126,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _figure(path, flow: np.ndarray, size: tuple[int, int], pair: str) -> None:
     """``flow (2, tiles_y, tiles_x)`` px as a labelled figure: its x and y components on one symmetric scale."""
-    from tpnet_gpu.figures import Panel, save  # noqa: PLC0415 - matplotlib on use
+    from tpnet_gpu.outputs.figures import Panel, save  # noqa: PLC0415 - matplotlib on use
 
     finite = np.abs(flow[np.isfinite(flow)])
     top = max(float(np.percentile(finite, 99)), 1e-3) if finite.size else 1.0
@@ -152,9 +151,3 @@ def add_parser(sub) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace the files of a non-empty output folder")
     p.add_argument("--no-figures", action="store_true", help="write no labelled figures (PNG, matplotlib): faster")
     p.set_defaults(func=run)
-
-
-if __name__ == "__main__":
-    from tpnet_gpu.cli import main  # noqa: PLC0415
-
-    sys.exit(main(["flow", *sys.argv[1:]]))

@@ -21,7 +21,7 @@ from tpnet_gpu.camera import DISTORTION_TERMS, EXTRINSIC_TERMS, Rig
 FORMAT = "tpnet-gpu rig"
 VERSION = 1
 SUFFIXES = (".json", ".toml")
-EXAMPLES_DIR = Path(__file__).resolve().parent / "rigs"
+EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "rigs"
 REQUIRED = ("width", "height", "pixel_size_mm", "focal_mm", "baseline_mm", "offsets")
 OPTIONAL = ("distortion", "distortion_radius_mm", "principal_points", "extrinsics", "rolls_deg")
 HEADER = ("format", "version", "description")

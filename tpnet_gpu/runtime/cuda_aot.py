@@ -7,13 +7,13 @@ What: the modules are found, not listed: each ``tpnet_gpu.kernels.*`` module but
 and kept when Warp registered ``@wp.kernel``s for it. Each is compiled per arch at ``layout.CUDA_BLOCK_DIM``, the
 block size of every CUDA launch (Warp builds a module once per block_dim), in its own subprocess (``jobs`` at a time,
 default one per core). A compile's report - per kernel: registers, stack frame and static shared memory read off the
-cubin's ELF sections (tpnet_gpu.cubin), dynamic shared memory (Warp's tile storage) from the module's ``.meta`` - is the
+cubin's ELF sections (tpnet_gpu.runtime.cubin), dynamic shared memory (Warp's tile storage) from the module's ``.meta`` - is the
 stamp ``report.json`` beside the cubin in ``$TPNET_CACHE_DIR/cuda-aot/warp-<version>/<key>/`` (default
 ``~/.cache/tpnet-gpu``), ``<key> = <module>.sm<arch>.bd<block_dim>.<hash>``, where ``<hash>`` is Warp's content hash
 of the module at that block_dim (its kernels, the ``@wp.func``s they call in any module, the module options). An
 unchanged tree is checked in about a second; an edited kernel recompiles its module only. Failures are not cached.
 
-    python -m tpnet_gpu.cuda_aot [--arch 90] [--arch 80] [--jobs N] [--json FILE]   # exit status 1: a module failed
+    python -m tpnet_gpu.runtime.cuda_aot [--arch 90] [--arch 80] [--jobs N] [--json FILE]   # exit status 1: a module failed
 """
 
 from __future__ import annotations
@@ -36,9 +36,9 @@ from pathlib import Path
 
 import warp as wp
 
-from tpnet_gpu.cubin import kernel_resources
+from tpnet_gpu.runtime.cubin import kernel_resources
 from tpnet_gpu.layout import CUDA_BLOCK_DIM
-from tpnet_gpu.warp_setup import init_warp
+from tpnet_gpu.runtime.warp_setup import init_warp
 
 PACKAGE = "tpnet_gpu.kernels"
 ROW_TAG = "CUDA_AOT_ROW "
@@ -131,7 +131,7 @@ def compile_module(name: str, arch: int, block_dim: int, root: Path) -> dict:
 
 def _run_worker(name: str, arch: int, block_dim: int, root: Path) -> dict:
     """Compile one module in a subprocess (NVRTC is single-threaded per module); its output explains a failure."""
-    cmd = [sys.executable, "-m", "tpnet_gpu.cuda_aot", "--worker", name, str(arch), str(block_dim), str(root)]
+    cmd = [sys.executable, "-m", "tpnet_gpu.runtime.cuda_aot", "--worker", name, str(arch), str(block_dim), str(root)]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}  # same imports as this process
     row = {"module": name, "arch": arch, "block_dim": block_dim, "ok": False, "cached": False}
     start = time.perf_counter()
@@ -189,7 +189,7 @@ def format_table(rows: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m tpnet_gpu.cuda_aot", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m tpnet_gpu.runtime.cuda_aot", description=__doc__.split("\n\n")[0])
     p.add_argument("--arch", type=int, action="append", help="target SM version, repeatable (default 90)")
     p.add_argument("--block-dim", type=int, default=CUDA_BLOCK_DIM, help="threads per block (default: CUDA's)")
     p.add_argument("--jobs", type=int, default=None, help="parallel compiles (default: one per core)")

@@ -21,7 +21,7 @@ def write_rig_atomically(rig, out: Path, *, overwrite: bool, description: str) -
     fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.tmp-", suffix=out.suffix, dir=out.parent)
     os.close(fd)
     try:
-        from tpnet_gpu.rigfile import write_rig  # noqa: PLC0415 - numpy and the rig on use
+        from tpnet_gpu.io.rigfile import write_rig  # noqa: PLC0415 - numpy and the rig on use
 
         write_rig(rig, tmp, description=description)
         os.replace(tmp, out)
@@ -32,7 +32,7 @@ def write_rig_atomically(rig, out: Path, *, overwrite: bool, description: str) -
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from tpnet_gpu import rigfile
+    from tpnet_gpu.io import rigfile
     from tpnet_gpu.calibration import CalibrationConfig, Frame, calibrate, edge_misalignment
     from tpnet_gpu.scenes.folder import load
 

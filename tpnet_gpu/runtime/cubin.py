@@ -1,5 +1,5 @@
 """Registers, stack frame and static shared memory of each kernel in a CUDA cubin, read from its ELF sections: no
-cuobjdump, CUDA toolkit or GPU needed (tpnet_gpu.cuda_aot reports them for the kernels it compiles).
+cuobjdump, CUDA toolkit or GPU needed (tpnet_gpu.runtime.cuda_aot reports them for the kernels it compiles).
 
 Per kernel: ``registers`` and ``stack`` (bytes per thread) are the .nv.info attributes EIATTR_REGCOUNT (0x2f) and
 EIATTR_FRAME_SIZE (0x11), as cuobjdump -elf names them; ``static_smem`` is the size of the ``.nv.shared.<kernel>``

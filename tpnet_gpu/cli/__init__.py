@@ -60,19 +60,19 @@ def _disparity(text: str | None, option: str, *, positive: bool) -> float | None
 
 def _cmd_process(args: argparse.Namespace) -> int:
     if args.ray or args.address is not None or args.workers is not None:  # scene folders on Ray (cli_ray.py)
-        from tpnet_gpu.cli_ray import process_scenes  # noqa: PLC0415
+        from tpnet_gpu.cli.ray import process_scenes  # noqa: PLC0415
 
         return process_scenes(args)
-    from tpnet_gpu.progress import Steps
+    from tpnet_gpu.runtime.progress import Steps
 
     with Steps(4, desc="process", logger=logging.getLogger("tpnet_gpu.cli")) as step:
         return _process(args, step)
 
 
 def _process(args: argparse.Namespace, step) -> int:
-    from tpnet_gpu import frame_outputs
+    from tpnet_gpu.outputs import frame_outputs
     from tpnet_gpu.outputs import check, output_folder
-    from tpnet_gpu.stereo_io import load_inputs, make_pipeline
+    from tpnet_gpu.io.stereo_io import load_inputs, make_pipeline
 
     max_d = _disparity(args.max_disparity, "--max-disparity", positive=True)
     min_d = _disparity(args.min_disparity, "--min-disparity", positive=False)
@@ -117,7 +117,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
     from tpnet_gpu.camera import Rig
     from tpnet_gpu.outputs import check, output_folder
-    from tpnet_gpu.progress import Steps
+    from tpnet_gpu.runtime.progress import Steps
     from tpnet_gpu.scenes import Optics, Sensor, demo_scene, random_scene, render
     from tpnet_gpu.scenes.folder import save
 
@@ -161,13 +161,13 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 
 
 def _cmd_dataset(args: argparse.Namespace) -> int:
-    from tpnet_gpu.dataset import DatasetSpec, build
+    from tpnet_gpu.training.dataset import DatasetSpec, build
 
     if args.scenes < 1:  # before any folder is made: zero scenes would be an empty data set, not an error
         raise ValueError(f"--scenes: expected at least 1 scene, got {args.scenes}")
     rig = None
     if args.rig is not None:
-        from tpnet_gpu import rigfile  # noqa: PLC0415
+        from tpnet_gpu.io import rigfile  # noqa: PLC0415
 
         rig = rigfile.rig_to_dict(rigfile.load(args.rig))
     if args.photo and not args.mono:
@@ -176,8 +176,8 @@ def _cmd_dataset(args: argparse.Namespace) -> int:
     spec = DatasetSpec(scenes=args.scenes, width=args.width, height=args.height, test_fraction=args.test_fraction,
                        seed=args.seed, supersample=args.supersample, rig=rig, **colour)
     start = time.perf_counter()
-    from tpnet_gpu.cli_ray import options  # noqa: PLC0415
-    from tpnet_gpu.ray_jobs import chunk_builder  # noqa: PLC0415
+    from tpnet_gpu.cli.ray import options  # noqa: PLC0415
+    from tpnet_gpu.training.ray_jobs import chunk_builder  # noqa: PLC0415
 
     ray = options(args)
     folder = build(args.out, spec, device=args.device, chunks=None if ray is None else chunk_builder(ray))
@@ -199,7 +199,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
     rig = None
     if args.rig is not None:
-        from tpnet_gpu import rigfile  # noqa: PLC0415
+        from tpnet_gpu.io import rigfile  # noqa: PLC0415
 
         rig = rigfile.load(args.rig)
     result = train(args.data, args.out, config, checkpoint=args.checkpoint, device=device, rig=rig)
@@ -366,7 +366,10 @@ def build_parser() -> argparse.ArgumentParser:
                        help="arguments for the benchmark (see `tpnet bench NAME --help`)")
     bench.set_defaults(func=_cmd_bench)
 
-    from tpnet_gpu import cli_calibrate, cli_export, cli_flow, cli_ray  # noqa: PLC0415 - subcommands and options in
+    from tpnet_gpu.cli import calibrate as cli_calibrate  # noqa: PLC0415 - subcommands and options in
+    from tpnet_gpu.cli import export as cli_export
+    from tpnet_gpu.cli import flow as cli_flow
+    from tpnet_gpu.cli import ray as cli_ray
     # their own modules
 
     for module in (cli_calibrate, cli_flow, cli_export):
@@ -376,7 +379,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from tpnet_gpu.progress import verbosity  # noqa: PLC0415
+    from tpnet_gpu.runtime.progress import verbosity  # noqa: PLC0415
 
     args = build_parser().parse_args(argv)
     try:
@@ -387,7 +390,3 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, OSError) as exc:
         print(f"tpnet {args.command}: error: {exc}", file=sys.stderr)
         return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -28,8 +28,8 @@ from tpnet_gpu.disparity.engine import DisparityEngine, correlation_for, referen
 from tpnet_gpu.disparity.grid import ring_median
 from tpnet_gpu.disparity.measure import Peak2D, row_chunks
 from tpnet_gpu.disparity.pairs import combine_pairs
-from tpnet_gpu.flow_align import Alignment
-from tpnet_gpu.flow_starts import bin_frames, coarse_size, scaled_start
+from tpnet_gpu.flow.align import Alignment
+from tpnet_gpu.flow.starts import bin_frames, coarse_size, scaled_start
 from tpnet_gpu.layout import CORR_RADIUS
 from tpnet_gpu.processor import TileProcessor
 

@@ -1,7 +1,7 @@
 """``tpnet demo``: the built-in rendered scene through the whole frame pipeline, with figures and a report.
 
-Writes into the output folder the frame's files (``tpnet_gpu.frame_outputs``: disparity, confidence, depth,
-points.ply, texture) and, against the rendered ground truth (``tpnet_gpu.demo_report``): ``ground_truth.tif``,
+Writes into the output folder the frame's files (``tpnet_gpu.outputs.frame_outputs``: disparity, confidence, depth,
+points.ply, texture) and, against the rendered ground truth (``tpnet_gpu.demo.report``): ``ground_truth.tif``,
 ``error.tif`` (final - ground truth, px), their figures, ``comparison.png`` (the ground truth beside the
 disparities and their errors), ``correlations.png`` (the pair correlations of a few tiles; ``correlations_figure.png`` labelled) and the report
 (``report.md`` with the figures, ``report.txt``, ``report.json``: RMSE per tile class, timing). docs/outputs.md.
@@ -14,9 +14,10 @@ import time
 
 import numpy as np
 
-from tpnet_gpu import evaluation, frame_outputs, outputs
-from tpnet_gpu.images import save_png
-from tpnet_gpu.progress import Steps
+from tpnet_gpu import evaluation, outputs
+from tpnet_gpu.outputs import frame_outputs
+from tpnet_gpu.io.images import save_png
+from tpnet_gpu.runtime.progress import Steps
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +41,7 @@ def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int =
     """Render the demo scene, run the pipeline (with ``weights``: TPNET weights from ``tpnet train``; default the
     shipped ones), write the files and the report into ``out`` (whole or not at all; a folder holding anything
     but an earlier demo's output only with ``overwrite``: ``outputs``, ``demo_report.is_demo_output``); ``figures`` False: no matplotlib figures. Returns the report."""
-    from tpnet_gpu import demo_report  # noqa: PLC0415 - heavy imports on use
+    from tpnet_gpu.demo import report as demo_report  # noqa: PLC0415 - heavy imports on use
     from tpnet_gpu.camera import Rig
     from tpnet_gpu.pipeline import Pipeline
     from tpnet_gpu.scenes import Sensor, demo_scene, render
@@ -86,7 +87,7 @@ def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int =
             save_png(folder / "correlations.png", correlation_sheet(corr, tiles))
             written.append("correlations.png")
             if figures:
-                from tpnet_gpu.figures import save_correlations  # noqa: PLC0415 - matplotlib on use
+                from tpnet_gpu.outputs.figures import save_correlations  # noqa: PLC0415 - matplotlib on use
 
                 save_correlations(folder / "correlations_figure.png", corr[tiles],
                                   [np.unravel_index(t, gt.shape) for t in tiles], tp.pairs,

@@ -1,12 +1,12 @@
 """One frame's results as files (docs/outputs.md): the raw float TIFFs, depth, the point cloud, the texture, and a
-labelled figure (``tpnet_gpu.figures``) beside each map. ``tpnet process`` and ``tpnet demo`` write through
+labelled figure (``tpnet_gpu.outputs.figures``) beside each map. ``tpnet process`` and ``tpnet demo`` write through
 ``write`` into the folder ``tpnet_gpu.outputs.output_folder`` gives them (whole or not at all).
 
 Files (tile maps are ``(ceil(h / 8), ceil(w / 8))``, one value per tile, for inputs of h x w pixels):
 
 * ``disparity.tif`` float32 px (NaN: unmeasured), ``confidence.tif`` float32 (0: none, unitless),
   ``depth.tif`` float32 metres (NaN: unmeasured, +inf: disparity <= 0) - each with its figure ``NAME.png``;
-* ``points.ply``: one point per tile of finite positive disparity, metres, rig axes (``tpnet_gpu.pointcloud``);
+* ``points.ply``: one point per tile of finite positive disparity, metres, rig axes (``tpnet_gpu.outputs.pointcloud``);
 * ``texture.tif`` float32 ``(channels, h, w)`` (R, G, B, alpha or Y, alpha; the frames' units), ``texture.png``
   its 8-bit picture (pixels, RGBA) and ``texture_figure.png`` that picture with axes and a title;
 * ``disparity_px.tif`` float32 ``(h, w)`` px per pixel (NaN: none) and its figure, where the pipeline made one
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tpnet_gpu import pointcloud
+from tpnet_gpu.outputs import pointcloud
 from tpnet_gpu.camera import Rig
 
 log = logging.getLogger(__name__)
@@ -98,7 +98,7 @@ def texture_rgba(texture: np.ndarray, white: float) -> np.ndarray:
 def map_panels(maps: FrameMaps, what: str, *, low: float | None = None, high: float | None = None) -> dict:
     """The figure panels of the tile maps (name -> ``figures.Panel``); ``low`` / ``high``: the disparity's
     colour scale (default: its percentiles)."""
-    from tpnet_gpu.figures import Panel  # noqa: PLC0415 - matplotlib on use
+    from tpnet_gpu.outputs.figures import Panel  # noqa: PLC0415 - matplotlib on use
 
     return {
         "disparity": Panel(maps.disparity, f"disparity: {what}", "disparity", "px", "turbo", low, high),
@@ -120,7 +120,7 @@ def write(folder, maps: FrameMaps, *, scene: str, what: str, figures: bool = Tru
         raise ValueError("per_pixel: these results have no per-pixel disparity (mono images of a stereo pair)")
     import tifffile  # noqa: PLC0415
 
-    from tpnet_gpu.images import save_png  # noqa: PLC0415
+    from tpnet_gpu.io.images import save_png  # noqa: PLC0415
 
     written = []
     values = {"disparity": maps.disparity, "confidence": maps.confidence,
@@ -154,7 +154,7 @@ def _write_pixels(folder, maps: FrameMaps, *, scene: str, what: str, per_pixel: 
     ``depth_px.tif`` and ``points_px.ply`` (measured pixels only: no point for a filled one)."""
     import tifffile  # noqa: PLC0415
 
-    from tpnet_gpu.images import save_png  # noqa: PLC0415
+    from tpnet_gpu.io.images import save_png  # noqa: PLC0415
 
     tifffile.imwrite(folder / "disparity_px.tif", maps.pixels.astype(np.float32))
     written = ["disparity_px.tif"]
@@ -176,7 +176,7 @@ def _write_pixels(folder, maps: FrameMaps, *, scene: str, what: str, per_pixel: 
 
 
 def _figures(folder, maps: FrameMaps, *, scene: str, what: str) -> list[str]:
-    from tpnet_gpu import figures  # noqa: PLC0415 - matplotlib on use
+    from tpnet_gpu.outputs import figures  # noqa: PLC0415 - matplotlib on use
 
     written = []
     panels = map_panels(maps, what)

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tpnet_gpu import pointcloud
-from tpnet_gpu.frame_outputs import FrameMaps, texture_rgba
+from tpnet_gpu.outputs import pointcloud
+from tpnet_gpu.outputs.frame_outputs import FrameMaps, texture_rgba
 
 ERROR_SCALE_PX = 0.5  # the error figures' colour scale ends here (larger errors: the bar's "over" colour)
 DISPARITY_PERCENTILE = 99  # the disparity figures' common scale: 0 .. this percentile of the ground truth
@@ -30,7 +30,7 @@ def write_truth(folder: Path, maps: FrameMaps, gt: np.ndarray, initial: np.ndarr
     written = ["ground_truth.tif", "error.tif"]
     if not figures:
         return written
-    from tpnet_gpu import figures as fig  # noqa: PLC0415 - matplotlib on use
+    from tpnet_gpu.outputs import figures as fig  # noqa: PLC0415 - matplotlib on use
 
     high = float(np.nanpercentile(gt, DISPARITY_PERCENTILE))
     gt_panel = fig.Panel(gt, "ground truth disparity (rendered)", "disparity", "px", "turbo", 0.0, high)
