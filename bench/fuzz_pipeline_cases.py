@@ -29,8 +29,8 @@ CONFIG = PipelineConfig()
 # argument -> a bad value; the message must begin with the first name (several name the same argument)
 BAD_ARGUMENTS = [
     ("height", dict(height=30)), ("width", dict(width=0)), ("cfa", dict(cfa="XYZ")), ("cfa", dict(cfa=3)),
-    ("EngineConfig.d_max", dict(max_disparity=float("nan"))),
-    ("EngineConfig.d_max", dict(min_disparity=3.0, max_disparity=1.0)),
+    ("max_disparity", dict(max_disparity=float("nan"))),
+    ("max_disparity", dict(min_disparity=3.0, max_disparity=1.0)),
     ("device", dict(device="gpu")), ("device", dict(device=0)), ("pairs", dict(pairs=[(0.5, 1)])),
     ("pairs", dict(pairs=[(0, 9)])), ("rig", dict(rig="quad")), ("weights", dict(weights="/nonexistent/w.pt")),
     ("camera_offsets", dict(rig="bad offsets")),

@@ -113,6 +113,23 @@ def test_command_defaults_are_the_configs():
         spec.scenes, spec.width, spec.height, spec.seed, spec.supersample, spec.test_fraction)
     assert (train.epochs, train.batch, train.seed, train.w_mode, train.error_scale) == (
         config.epochs, config.batch, config.seed, config.w_mode, config.error_scale)
+    # process and demo: the pipeline's config, load_inputs' and run_demo's own defaults; the range: none given
+    import inspect
+
+    from tpnet_gpu.config import PipelineConfig
+    from tpnet_gpu.demo import run_demo
+    from tpnet_gpu.io.stereo_io import load_inputs
+
+    proc, demo = parser.parse_args(["process", "a"]), parser.parse_args(["demo"])
+    library = PipelineConfig()
+    assert (proc.method, proc.min_confidence, proc.keep_fraction) == (library.method, library.min_confidence,
+                                                                      library.keep_fraction)
+    signature = inspect.signature(load_inputs).parameters
+    assert (proc.colour, proc.reference) == (signature["colour"].default, signature["reference"].default)
+    assert proc.min_disparity is None and proc.max_disparity is None and proc.backend is None
+    signature = inspect.signature(run_demo).parameters
+    assert (demo.out, demo.width, demo.height, demo.seed) == tuple(signature[k].default
+                                                                  for k in ("out", "width", "height", "seed"))
 
 
 # --- process: stereo pairs and rigs ------------------------------------------------------------------------
@@ -178,10 +195,11 @@ def test_process_pair_through_the_engine_crops_to_the_image(tmp_path, engine, ca
     assert "stereo pair" in capsys.readouterr().out
 
 
-def test_one_shot_backend_and_threads_follow_the_frame_size(tmp_path, engine):
-    # docs/platform.md §4: without --backend a frame of at most SMALL_FRAME_PIXELS (320x240) runs on Warp with
-    # torch on one thread, a larger one on the library default (None); --backend wins; torch's count is restored.
-    from tpnet_gpu.cli import SMALL_FRAME_PIXELS
+def test_one_shot_threads_follow_the_frame_size_and_the_backend_is_passed(tmp_path, engine):
+    # docs/platform.md §4: a frame of at most SMALL_FRAME_PIXELS (320x240) runs with torch on one thread, a larger
+    # one as set; the CLI passes --backend as given (None: the library's choice, tested in test_processor.py);
+    # torch's count is restored.
+    from tpnet_gpu.config import SMALL_FRAME_PIXELS
 
     assert SMALL_FRAME_PIXELS == 320 * 240
     threads = torch.get_num_threads()
@@ -190,7 +208,7 @@ def test_one_shot_backend_and_threads_follow_the_frame_size(tmp_path, engine):
     for images, backend in ((small, []), (big, []), (small, ["--backend", "taichi"])):
         assert main(["process", *images, "--max-disparity", "4", "--out", str(tmp_path / "o"), "--overwrite",
                      "--no-figures", *backend]) == 0
-    assert [(c["height"] * c["width"], c["backend"]) for c in engine] == [(76800, "warp"), (78720, None),
+    assert [(c["height"] * c["width"], c["backend"]) for c in engine] == [(76800, None), (78720, None),
                                                                           (76800, "taichi")]
     assert [c["torch_threads"] for c in engine] == [1, threads, 1] and torch.get_num_threads() == threads
 

@@ -16,7 +16,7 @@ from tpnet_gpu import tables
 from tpnet_gpu.io import rawio
 from tpnet_gpu.io import rigfile
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.io.stereo_io import fit_rig, load_inputs, load_stereo_pair, make_pipeline
+from tpnet_gpu.io.stereo_io import Frames, Inputs, fit_rig, load_inputs, load_stereo_pair, make_pipeline
 
 RNG = np.random.default_rng(3)
 CALIBRATED = Rig(width=40, height=24, offsets=((-0.5, 0.0), (0.5, 0.0)), distortion=(0.01,) + (0.0,) * 6)
@@ -128,17 +128,37 @@ def pipeline(monkeypatch):
     return use
 
 
+def _inputs(height, width, cfa, rig, kind):
+    cams = rig.cams
+    frames = Frames(np.zeros((cams, height, width), np.float32), (height, width), 255.0, 8, cfa, ())
+    return Inputs(frames, rig, kind)
+
+
 def test_make_pipeline_with_the_engine(pipeline):
     calls = pipeline(EnginePipeline)
-    rig = rigfile.load("binocular").referenced_to(0)
+    rig = replace(rigfile.load("binocular").referenced_to(0), width=40, height=24, _cache={})
     from tpnet_gpu.pipeline import PipelineConfig
 
-    make_pipeline(24, 40, cfa=None, rig=rig, min_disparity=-1.0, max_disparity=12.5, device="cpu", backend="warp")
+    pair = _inputs(24, 40, None, rig, "pair")
+    make_pipeline(pair, min_disparity=-1.0, max_disparity=12.5, device="cpu", backend="warp")
     assert calls == [dict(height=24, width=40, cfa=None, rig=rig, min_disparity=-1.0, max_disparity=12.5,
                           device="cpu", backend="warp", config=PipelineConfig())]
-    make_pipeline(24, 40, cfa=None, rig=rig, keep_fraction=0.5, cross_check=False)
+    make_pipeline(pair, max_disparity=4.0, keep_fraction=0.5, cross_check=False)
     assert calls[-1]["config"] == PipelineConfig(keep_fraction=0.5, cross_check=False)
-    make_pipeline(32, 48, cfa="GRBG", rig=Rig(), device=None, backend=None)
+    assert calls[-1]["min_disparity"] is None  # not given: the engine's default (0)
+    quad = Rig(width=48, height=32)
+    make_pipeline(_inputs(32, 48, "GRBG", quad, "raw"), device=None, backend=None)
     assert calls[-1]["max_disparity"] is None  # not given: Pipeline takes None as the engine's default (the rig's)
+
+
+def test_make_pipeline_refuses_ordinary_images_without_a_range(pipeline):
+    """Ordinary images' rig is made up (focal length, baseline unknown): the library, not only the CLI, wants
+    their largest disparity - and builds nothing without it."""
+    calls = pipeline(EnginePipeline)
+    rig = replace(rigfile.load("binocular").referenced_to(0), width=40, height=24, _cache={})
+    for kind in ("pair", "images"):
+        with pytest.raises(ValueError, match=r"max_disparity: required for ordinary images"):
+            make_pipeline(_inputs(24, 40, None, rig, kind))
+    assert calls == []
 
 

@@ -19,7 +19,7 @@ _EXPORTS = {
     "CorrelationConfig": "tpnet_gpu.config",
     "TextureConfig": "tpnet_gpu.config",
     "Pipeline": "tpnet_gpu.pipeline",
-    "PipelineConfig": "tpnet_gpu.pipeline",
+    "PipelineConfig": "tpnet_gpu.config",
     "FrameResult": "tpnet_gpu.pipeline",
     "load_frames": "tpnet_gpu.pipeline",
     "Rig": "tpnet_gpu.camera",

@@ -10,6 +10,9 @@ import numpy as np
 from tpnet_gpu import tables
 
 BACKENDS = ("warp", "taichi")  # the tile processor's kernel languages
+# A frame of at most this many pixels is start-up bound (docs/platform.md §4): the Warp backend starts ~1 CPU-second
+# sooner than Taichi and runs such a frame as fast, so it is the default there (TileProcessor).
+SMALL_FRAME_PIXELS = 320 * 240
 METHODS = ("auto", "tpnet", "engine")  # what makes the disparity: PipelineConfig.method, `tpnet process --method`
 MEASURES = ("lma", "axis")  # the disparity engine's per-tile measurements
 NEAR_DRAWS = 2  # "near" training targets per scene (ground truth + a small log-uniform offset)
@@ -217,7 +220,9 @@ class EngineConfig:
     """The disparity engine (tpnet_gpu/disparity, docs/disparity.md): a sparse full-range search, one pass of
     every tile at its answer, a full-range sweep of the doubtful tiles, then sparse refinement.
 
-    Disparities in px. ``d_min``/``d_max``: the range searched (None for d_max: from the rig and ``nearest_m``).
+    Disparities in px. The range searched is the engine's (``DisparityEngine`` / ``Pipeline``'s
+    ``min_disparity``, ``max_disparity``: one door); without a maximum it ends at the rig's disparity at
+    ``nearest_m`` metres.
     Each pass's correlations are read within +-``reach`` px of its target; sweeps step 2 ``reach`` - 2 px.
     A tile is doubtful when its aggregated-cost margin is < ``verify_margin`` with a correlation >=
     ``verify_strength`` at its choice. Aggregation (SGM over the tile grid) penalties ``p1`` (one-bin step),
@@ -230,8 +235,6 @@ class EngineConfig:
     refined tile that ends more than ``leash`` px from a first-stage answer whose margin is >= ``leash_margin``
     keeps the first stage's answer."""
 
-    d_min: float = 0.0
-    d_max: float | None = None
     nearest_m: float = 8.0
     reach: float = 6.0
     bin_step: float = 0.5
@@ -258,7 +261,51 @@ class EngineConfig:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0):
                 raise ValueError(f"EngineConfig.{name}: expected a finite number >= 0, got {value!r}")
-        if self.d_max is not None and not (np.isfinite(self.d_max) and self.d_max > self.d_min):
-            raise ValueError(f"EngineConfig.d_max: expected a finite number > d_min={self.d_min}, got {self.d_max!r}")
         if not isinstance(self.refine_passes, int) or self.refine_passes < 0:
             raise ValueError(f"EngineConfig.refine_passes: expected an int >= 0, got {self.refine_passes!r}")
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """``engine``: the disparity engine's settings; ``network_passes``: TPNET passes (when the pipeline has
+    weights for its rig), each re-correlating at the previous one's disparity; ``textures``: make the RGBA
+    texture; ``two_surface``: also fit both surfaces of tiles whose correlation shows two
+    (``FrameResult.surfaces``, tpnet_gpu/disparity/two_surface.py); ``method`` (``tpnet process --method``):
+    "auto" runs TPNET where weights shipped for default use fit the rig and frames, else the engine alone
+    (logged); "tpnet" also takes the weights shipped on request (their recipe's ``on_request`` says why they
+    are not the default; ValueError where none fit); "engine" runs the engine alone (to see what TPNET adds).
+
+    Which answers come out (disparity.md §8): ``cross_check`` - the engine runs again with another camera as the
+    reference and a tile whose answers disagree by more than ``checks.CROSS_CHECK_PX``, or whose windows leave
+    an image at its answer, has no value (None: on for a two-camera rig, the stereo left-right check; it costs
+    a second engine run); then tiles of confidence below ``min_confidence`` and all but the ``keep_fraction``
+    most confident answers have none. ``per_pixel``: also a per-pixel disparity (``FrameResult.pixels``) from
+    the tile answers (``disparity/per_pixel.py``; mono frames with a camera at the reference; None: on where
+    that holds and the rig has two cameras). With both (mono pairs by default) the check is made per pixel
+    instead (disparity.md §10, ``disparity/pixel_check.py``): each view's per-pixel map, a left-right check,
+    the rejected pixels filled with the background, and each tile's answer the window's mean of those pixels,
+    its confidence the share of the window that backs it (no value below ``pixel_check.MIN_SUPPORT``, nor
+    where the windows leave an image at the answer)."""
+
+    engine: EngineConfig = EngineConfig()
+    network_passes: int = 1
+    textures: bool = True
+    two_surface: bool = False
+    cross_check: bool | None = None
+    min_confidence: float = 0.0
+    keep_fraction: float = 1.0
+    per_pixel: bool | None = None
+    method: str = "auto"
+
+    def __post_init__(self):
+        if not isinstance(self.network_passes, int) or self.network_passes < 1:
+            raise ValueError(f"network_passes: expected an int >= 1, got {self.network_passes!r}")
+        if self.method not in METHODS:
+            raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {self.method!r}")
+        for name in ("cross_check", "per_pixel"):
+            if not (getattr(self, name) is None or isinstance(getattr(self, name), bool)):
+                raise ValueError(f"{name}: expected True, False or None (automatic), got {getattr(self, name)!r}")
+        if not (isinstance(self.min_confidence, (int, float)) and 0.0 <= self.min_confidence < float("inf")):
+            raise ValueError(f"min_confidence: expected a finite number >= 0, got {self.min_confidence!r}")
+        if not (isinstance(self.keep_fraction, (int, float)) and 0.0 < self.keep_fraction <= 1.0):
+            raise ValueError(f"keep_fraction: expected a number in (0, 1], got {self.keep_fraction!r}")

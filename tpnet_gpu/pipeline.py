@@ -15,14 +15,14 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.config import METHODS, EngineConfig, TextureConfig
+from tpnet_gpu.config import PipelineConfig, TextureConfig
 from tpnet_gpu.disparity.checks import CROSS_CHECK_PX, cross_camera, cross_difference, windows_inside
 from tpnet_gpu.disparity.engine import DisparityEngine
 from tpnet_gpu.disparity.grid import grow
@@ -36,52 +36,6 @@ from tpnet_gpu.net.neighbours import CLUSTER_RADIUS
 from tpnet_gpu.processor import TileProcessor
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class PipelineConfig:
-    """``engine``: the disparity engine's settings; ``network_passes``: TPNET passes (when the pipeline has
-    weights for its rig), each re-correlating at the previous one's disparity; ``textures``: make the RGBA
-    texture; ``two_surface``: also fit both surfaces of tiles whose correlation shows two
-    (``FrameResult.surfaces``, tpnet_gpu/disparity/two_surface.py); ``method`` (``tpnet process --method``):
-    "auto" runs TPNET where weights shipped for default use fit the rig and frames, else the engine alone
-    (logged); "tpnet" also takes the weights shipped on request (their recipe's ``on_request`` says why they
-    are not the default; ValueError where none fit); "engine" runs the engine alone (to see what TPNET adds).
-
-    Which answers come out (disparity.md §8): ``cross_check`` - the engine runs again with another camera as the
-    reference and a tile whose answers disagree by more than ``checks.CROSS_CHECK_PX``, or whose windows leave
-    an image at its answer, has no value (None: on for a two-camera rig, the stereo left-right check; it costs
-    a second engine run); then tiles of confidence below ``min_confidence`` and all but the ``keep_fraction``
-    most confident answers have none. ``per_pixel``: also a per-pixel disparity (``FrameResult.pixels``) from
-    the tile answers (``disparity/per_pixel.py``; mono frames with a camera at the reference; None: on where
-    that holds and the rig has two cameras). With both (mono pairs by default) the check is made per pixel
-    instead (disparity.md §10, ``disparity/pixel_check.py``): each view's per-pixel map, a left-right check,
-    the rejected pixels filled with the background, and each tile's answer the window's mean of those pixels,
-    its confidence the share of the window that backs it (no value below ``pixel_check.MIN_SUPPORT``, nor
-    where the windows leave an image at the answer)."""
-
-    engine: EngineConfig = EngineConfig()
-    network_passes: int = 1
-    textures: bool = True
-    two_surface: bool = False
-    cross_check: bool | None = None
-    min_confidence: float = 0.0
-    keep_fraction: float = 1.0
-    per_pixel: bool | None = None
-    method: str = "auto"
-
-    def __post_init__(self):
-        if not isinstance(self.network_passes, int) or self.network_passes < 1:
-            raise ValueError(f"network_passes: expected an int >= 1, got {self.network_passes!r}")
-        if self.method not in METHODS:
-            raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {self.method!r}")
-        for name in ("cross_check", "per_pixel"):
-            if not (getattr(self, name) is None or isinstance(getattr(self, name), bool)):
-                raise ValueError(f"{name}: expected True, False or None (automatic), got {getattr(self, name)!r}")
-        if not (isinstance(self.min_confidence, (int, float)) and 0.0 <= self.min_confidence < float("inf")):
-            raise ValueError(f"min_confidence: expected a finite number >= 0, got {self.min_confidence!r}")
-        if not (isinstance(self.keep_fraction, (int, float)) and 0.0 < self.keep_fraction <= 1.0):
-            raise ValueError(f"keep_fraction: expected a number in (0, 1], got {self.keep_fraction!r}")
 
 
 @dataclass(frozen=True)
@@ -156,12 +110,9 @@ class Pipeline:
                  min_disparity: float | None = None, max_disparity: float | None = None, weights=None,
                  device: str | None = None, config: PipelineConfig = PipelineConfig(), backend: str | None = None):
         engine_config = config.engine
-        if min_disparity is not None:
-            engine_config = replace(engine_config, d_min=float(min_disparity))
-        if max_disparity is not None:
-            engine_config = replace(engine_config, d_max=float(max_disparity))
-        self.config = replace(config, engine=engine_config)
-        self.engine = DisparityEngine(height, width, rig=rig, pairs=pairs, cfa=cfa, config=engine_config,
+        self.config = config
+        self.engine = DisparityEngine(height, width, rig=rig, pairs=pairs, cfa=cfa, min_disparity=min_disparity,
+                                      max_disparity=max_disparity, config=engine_config,
                                       device=device, backend=backend, textures=config.textures)
         tp = self.engine.tp
         self.device = tp.torch_device
@@ -186,7 +137,7 @@ class Pipeline:
             self.model = infer.load(self.weights, device=self.device)
             self._infer = infer.infer  # an attribute, so the pipeline bench can time the network's share
         log.info("pipeline %dx%d on %s: %d cameras, disparity %g .. %g px, weights %s", width, height, self.device,
-                 self.engine.rig.cams, engine_config.d_min, self.engine.d_max, self.weights)
+                 self.engine.rig.cams, self.engine.d_min, self.engine.d_max, self.weights)
 
     def _checks(self, height, width, cfa, pairs, engine_config, device, backend) -> None:
         """The cross-check's engine (``PipelineConfig.cross_check``) and the per-pixel step's cameras."""
@@ -197,7 +148,9 @@ class Pipeline:
         self.cross_offset = tuple(float(v) for v in self.offsets[self.cross_cam])
         if cfg.cross_check or (cfg.cross_check is None and two):
             self.cross_engine = DisparityEngine(height, width, rig=rig.referenced_to(self.cross_cam), pairs=pairs,
-                                                cfa=cfa, config=engine_config, device=device, backend=backend)
+                                                cfa=cfa, min_disparity=self.engine.d_min,
+                                                max_disparity=self.engine.d_max, config=engine_config,
+                                                device=device, backend=backend)
         at_reference = np.nonzero(np.linalg.norm(self.offsets, axis=1) < 1e-9)[0]
         possible = cfa is None and at_reference.size > 0
         if cfg.per_pixel and not possible:

@@ -18,4 +18,4 @@ def test_bench_flow_tiny(tmp_path, capsys):
                                     "roll 10 mrad | 4 cameras"}
     assert all(set(row) == ROW for row in report["stats"].values())
     assert "median px" in capsys.readouterr().out
-    assert "flow" in cli.BENCHES
+    assert "flow" in cli.bench.BENCHES

@@ -21,4 +21,4 @@ def test_bench_two_surface_tiny(tmp_path, capsys):
     assert report["totals"]["single_either_where_two"] <= min(report["totals"]["single_either"],
                                                               report["totals"]["reported_two"])
     assert "both within 0.5 px" in capsys.readouterr().out
-    assert "two_surface" in cli.BENCHES
+    assert "two_surface" in cli.bench.BENCHES

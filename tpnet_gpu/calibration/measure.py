@@ -64,11 +64,10 @@ def _peaks(engine: DisparityEngine, target: torch.Tensor) -> tuple[torch.Tensor,
 
 def tile_disparities(engine: DisparityEngine, rig: Rig) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``(disparity (tiles,), lags (tiles, P, 2), strength (tiles,))`` from the 2-D peaks (module docstring)."""
-    cfg = engine.config
     tiles = engine.tp.tiles
     best = torch.full((tiles,), -float("inf"), dtype=torch.float64)
     target = torch.zeros(tiles, dtype=torch.float64)
-    for t in np.arange(cfg.d_min, engine.d_max + SWEEP_STEP, SWEEP_STEP):
+    for t in np.arange(engine.d_min, engine.d_max + SWEEP_STEP, SWEEP_STEP):
         _, strength = _peaks(engine, torch.full((tiles,), float(t)))
         target = torch.where(strength > best, float(t), target)
         best = torch.maximum(best, strength)

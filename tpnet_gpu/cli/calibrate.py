@@ -31,7 +31,7 @@ def write_rig_atomically(rig, out: Path, *, overwrite: bool, description: str) -
     return out
 
 
-def _cmd_calibrate(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> int:
     from tpnet_gpu.io import rigfile
     from tpnet_gpu.calibration import CalibrationConfig, Frame, calibrate, edge_misalignment
     from tpnet_gpu.scenes.folder import load
@@ -62,7 +62,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_parser(sub) -> None:
+def add_parser(sub) -> argparse.ArgumentParser:
     cal = sub.add_parser("calibrate", help="fit the quad's extrinsic corrections to scene folders: a calibrated "
                          "rig file", description="Field calibration (docs/calibration.md): the pairs' 2-D peaks of "
                          "many tiles give the rig's 13 extrinsic corrections (tilt, azimuth, roll, zoom), fitted by "
@@ -76,4 +76,5 @@ def add_parser(sub) -> None:
     cal.add_argument("--rounds", type=int, default=4, help="most measure + fit rounds (default 4)")
     cal.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     cal.add_argument("--overwrite", action="store_true", help="replace an existing --out file (default: refuse)")
-    cal.set_defaults(func=_cmd_calibrate)
+    cal.set_defaults(func=run)
+    return cal

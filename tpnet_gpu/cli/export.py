@@ -7,7 +7,7 @@ import argparse
 import sys
 
 
-def _cmd_export(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> int:
     from tpnet_gpu.net import infer  # noqa: PLC0415 - torch on use
     from tpnet_gpu.net.export import OPSET, export_onnx  # noqa: PLC0415
 
@@ -24,7 +24,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_parser(sub) -> None:
+def add_parser(sub) -> argparse.ArgumentParser:
     """Register ``tpnet export`` on the subparsers ``sub``."""
     exp = sub.add_parser("export", help="write the network (whole-frame form, any frame size) to ONNX",
                          description="Writes TPNET's whole-frame form to ONNX: inputs `layers` (tiles_y, tiles_x, G, "
@@ -36,4 +36,5 @@ def add_parser(sub) -> None:
                      help="TPNET weights (.pt, e.g. from `tpnet train`; default: the shipped quad weights)")
     exp.add_argument("--opset", type=int, default=None, help="ONNX opset (default and minimum: 18)")
     exp.add_argument("--overwrite", action="store_true", help="replace an existing file (default: refuse it)")
-    exp.set_defaults(func=_cmd_export)
+    exp.set_defaults(func=run)
+    return exp

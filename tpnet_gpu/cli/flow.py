@@ -134,7 +134,7 @@ def _figure(path, flow: np.ndarray, size: tuple[int, int], pair: str) -> None:
     save(path, panels, title=f"tile motion vectors, {pair}", size=size)
 
 
-def add_parser(sub) -> None:
+def add_parser(sub) -> argparse.ArgumentParser:
     """Register ``tpnet flow`` on the ``tpnet`` subparsers ``sub``."""
     from tpnet_gpu.config import BACKENDS  # noqa: PLC0415 - light: numpy only
 
@@ -151,3 +151,4 @@ def add_parser(sub) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace the files of a non-empty output folder")
     p.add_argument("--no-figures", action="store_true", help="write no labelled figures (PNG, matplotlib): faster")
     p.set_defaults(func=run)
+    return p

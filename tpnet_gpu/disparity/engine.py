@@ -95,6 +95,25 @@ def correlation_for(cfa: str | None) -> CorrelationConfig:
     return BASELINE_CORRELATION if cfa is not None else CorrelationConfig(fat_zero=BASELINE_CORRELATION.fat_zero)
 
 
+def disparity_range(min_disparity, max_disparity, rig: Rig, nearest_m: float) -> tuple[float, float]:
+    """The range searched, px: ``(min_disparity, max_disparity)`` checked (finite, max > min); None takes the
+    default: 0 for the minimum, ``rig``'s disparity at ``nearest_m`` metres for the maximum."""
+    min_disparity = 0.0 if min_disparity is None else min_disparity
+    values = {"min_disparity": min_disparity, "max_disparity": max_disparity}
+    for name, value in values.items():
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+                or not np.isfinite(value):
+            raise ValueError(f"{name}: expected a finite number of pixels, got {value!r}")
+    low = float(min_disparity)
+    high = float(rig.disparity(nearest_m)) if max_disparity is None else float(max_disparity)
+    if high <= low:
+        raise ValueError(f"max_disparity: expected more than min_disparity={low:g}, got {high:g}"
+                         + (f" (the rig's disparity at {nearest_m:g} m)" if max_disparity is None else ""))
+    return low, high
+
+
 class DisparityEngine:
     """Disparity of frames ``(cams, height, width)`` from any rig (see the module docstring).
 
@@ -103,11 +122,14 @@ class DisparityEngine:
             the ideal quad of this frame size.
         pairs: camera pairs to correlate (default: every pair of the rig, the quad's 6 in the spec's order).
         cfa: Bayer pattern or None (mono).
+        min_disparity, max_disparity: the range searched, px (None: 0, and the rig's disparity at
+            ``config.nearest_m``; ``disparity_range``).
         config: search and refinement settings.
         textures: build the full-resolution processor with textures (the pipeline shares it for the texture).
     """
 
     def __init__(self, height: int, width: int, *, rig: Rig | None = None, pairs=None, cfa: str | None = "GRBG",
+                 min_disparity: float | None = None, max_disparity: float | None = None,
                  config: EngineConfig = EngineConfig(), device: str | None = None, backend: str | None = None,
                  textures: bool = False):
         if rig is not None and not isinstance(rig, Rig):  # a rig file's name is for rigfile.load (issue 16 fuzz)
@@ -120,7 +142,7 @@ class DisparityEngine:
         if pairs is None:
             pairs = default_pairs(offsets)
         self.config = config
-        self.d_max = config.d_max if config.d_max is not None else float(self.rig.disparity(config.nearest_m))
+        self.d_min, self.d_max = disparity_range(min_disparity, max_disparity, self.rig, config.nearest_m)
         self.tp = TileProcessor(height, width, camera_offsets=offsets, pairs=pairs, cfa=cfa,
                                 config=correlation_for(cfa), textures=textures, device=device, backend=backend)
         self.device = self.tp.torch_device
@@ -148,11 +170,11 @@ class DisparityEngine:
                             for dy, dx in ((1, 0), (0, 1), (1, 1))]
         self.sparse_share = float(self.sparse_tiles.float().mean())
         # the cost volumes, (tiles_y, tiles_x, bins) and that of the sparse grid: allocated once, reset per frame
-        lo, hi = config.d_min - config.reach, self.d_max + config.reach
+        lo, hi = self.d_min - config.reach, self.d_max + config.reach
         self.volume = CostVolume(self.grid, lo, hi, config.bin_step, self.device)
         self._uniform = torch.zeros(self.grid, device=self.device)  # a sweep pass's uniform target
         self.sparse_volume = CostVolume(self.sparse_grid, lo, hi, config.bin_step, self.device)
-        self.occlusion = Occlusion(offsets, self.tp.pairs, OCCLUSION_JUMP, self.d_max - config.d_min,
+        self.occlusion = Occlusion(offsets, self.tp.pairs, OCCLUSION_JUMP, self.d_max - self.d_min,
                                    self.device)
         self.unhidden_offsets = torch.arange(-UNHIDDEN_READ, UNHIDDEN_READ + 1e-6, OFFSETS_STEP, device=self.device)
         self.unhidden_grid = self.sampler.uniform(self.unhidden_offsets, CHUNK)  # its lags, made once
@@ -195,7 +217,7 @@ class DisparityEngine:
     def _full_sweep(self) -> np.ndarray:
         """Uniform targets covering [d_min, d_max], each read within +-reach (2 px overlap between passes)."""
         cfg = self.config
-        return np.arange(cfg.d_min + cfg.reach - 2.0, self.d_max + cfg.reach, 2 * cfg.reach - 2.0)
+        return np.arange(self.d_min + cfg.reach - 2.0, self.d_max + cfg.reach, 2 * cfg.reach - 2.0)
 
     def search(self) -> tuple[torch.Tensor, torch.Tensor, float]:
         """First stage on the frame loaded into the processor: ``(search, margin, passes)``."""

@@ -281,18 +281,22 @@ def load_inputs(paths, *, rig=None, cfa: str | None = None, colour: str = "luma"
     return Inputs(frames, _reference(fit_rig(rig, frames), reference, kind), kind)
 
 
-def make_pipeline(height: int, width: int, *, cfa: str | None, rig: Rig, min_disparity: float = 0.0,
-                  max_disparity: float | None = None, weights=None, device: str | None = None,
-                  backend: str | None = None, two_surface: bool = False, **answers):
-    """The pipeline for frames of ``height`` x ``width`` from ``rig`` (any camera count; ``max_disparity`` None:
-    the engine's default from the rig; ``weights`` None: the shipped ones for the rig, ``Pipeline``;
-    ``two_surface``: also both surfaces of two-surface tiles; ``answers``: ``PipelineConfig``'s
-    ``cross_check``, ``min_confidence``, ``keep_fraction``, ``per_pixel``, ``method``)."""
+def make_pipeline(inputs: Inputs, *, min_disparity: float | None = None, max_disparity: float | None = None, weights=None,
+                  device: str | None = None, backend: str | None = None, two_surface: bool = False, **answers):
+    """The pipeline for ``inputs`` (``load_inputs``: their padded size, colours and fitted rig; any camera count).
+    ``min_disparity`` None: the engine's default (0); ``max_disparity`` None: the engine's default from the rig - for a scene or raw files, whose rig is a real
+    one; ordinary images (a pair, a rig's images) need it (``ValueError``: their rig's focal length and
+    baseline are not known). ``weights`` None: the shipped ones for the rig (``Pipeline``); ``two_surface``:
+    also both surfaces of two-surface tiles; ``answers``: ``PipelineConfig``'s ``cross_check``,
+    ``min_confidence``, ``keep_fraction``, ``per_pixel``, ``method``."""
     from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415 - torch, Warp and the model on use
 
+    if inputs.kind in ("pair", "images") and max_disparity is None:
+        raise ValueError("max_disparity: required for ordinary images (the largest disparity searched, px)")
     config = PipelineConfig(two_surface=two_surface, **answers)
-    return Pipeline(height, width, cfa=cfa, rig=rig, min_disparity=min_disparity, max_disparity=max_disparity,
-                    weights=weights, device=device, backend=backend, config=config)
+    height, width = inputs.frames.padded
+    return Pipeline(height, width, cfa=inputs.frames.cfa, rig=inputs.rig, min_disparity=min_disparity,
+                    max_disparity=max_disparity, weights=weights, device=device, backend=backend, config=config)
 
 
 def load_frame(path, *, cfa: str | None = None, colour: str = "luma") -> Frames:

@@ -33,7 +33,7 @@ import torch
 import warp as wp
 
 from tpnet_gpu import tables
-from tpnet_gpu.config import CorrelationConfig, TextureConfig
+from tpnet_gpu.config import SMALL_FRAME_PIXELS, CorrelationConfig, TextureConfig
 from tpnet_gpu.processor import validate
 from tpnet_gpu.processor.buffers import Buffers, TileResult
 from tpnet_gpu.processor.warp_backend import WarpBackend
@@ -65,8 +65,9 @@ class TileProcessor:
         backend: kernel language, "warp" or "taichi" (``kernels/taichi_*.py``: the same math, inputs and
             outputs; on the CPU it spreads the tiles over every core, see ``tpnet_gpu.runtime.taichi_setup`` for the
             thread count and the offline cache). Default (None): the faster by measurement (bench_throughput,
-            README): Taichi on the CPU (3.1x Warp's speed for a full frame on 2 cores), Warp on CUDA and
-            wherever ``graph`` is asked for.
+            README): Taichi on the CPU (3.1x Warp's speed for a full frame on 2 cores), Warp on CUDA, wherever
+            ``graph`` is asked for, and for frames of at most ``config.SMALL_FRAME_PIXELS`` (start-up bound: Warp
+            starts ~1 CPU-second sooner and runs them as fast).
     """
 
     def __init__(
@@ -90,8 +91,8 @@ class TileProcessor:
         validate.backend(backend, graph)
         init_warp()
         self.device = wp.get_device(validate.device(device))
-        if backend is None:
-            backend = "warp" if (graph or self.device.is_cuda) else "taichi"
+        if backend is None:  # Warp on CUDA and for small frames (config.SMALL_FRAME_PIXELS), else Taichi
+            backend = "warp" if (graph or self.device.is_cuda or height * width <= SMALL_FRAME_PIXELS) else "taichi"
         if backend == "taichi" and self.device.is_cuda and self.device.ordinal != 0:
             raise ValueError(f"device: the Taichi backend runs on cpu or cuda:0 only, got {self.device}")
         self.geometry = geo

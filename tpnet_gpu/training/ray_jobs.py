@@ -121,12 +121,13 @@ class _Pipelines:
     def __init__(self, make):
         self.make, self.kept = make, OrderedDict()
 
-    def __call__(self, height, width, *, rig, **options):
+    def __call__(self, inputs, **options):
         from tpnet_gpu.io.rigfile import rig_to_dict  # noqa: PLC0415
 
-        key = (height, width, json.dumps(rig_to_dict(rig), sort_keys=True), json.dumps(options, sort_keys=True))
+        key = (inputs.frames.padded, inputs.frames.cfa, inputs.kind, json.dumps(rig_to_dict(inputs.rig), sort_keys=True),
+               json.dumps(options, sort_keys=True))
         if key not in self.kept:
-            self.kept[key] = self.make(height, width, rig=rig, **options)
+            self.kept[key] = self.make(inputs, **options)
             if len(self.kept) > PIPELINES_KEPT:
                 self.kept.popitem(last=False)
         self.kept.move_to_end(key)

@@ -1,0 +1,54 @@
+"""What the subcommands share: option help texts and the parsing of option values the library cannot see
+(a number of pixels given as text)."""
+
+from __future__ import annotations
+
+import contextlib
+import inspect
+import math
+
+from tpnet_gpu.config import SMALL_FRAME_PIXELS
+
+BACKEND_HELP = (f"tile-processor kernels (default: warp for frames of at most {SMALL_FRAME_PIXELS} pixels, whose "
+                "start-up dominates, and on CUDA; else taichi)")
+DEVICE_HELP = "cpu or cuda (default: cuda when present)"
+OVERWRITE_HELP = "replace the files of a non-empty output folder (default: refuse it)"
+WEIGHTS_HELP = ("TPNET weights from `tpnet train` (default: the shipped ones for the rig); weights trained for another "
+                "rig or other colours are refused")
+NO_FIGURES_HELP = "write no labelled figures (PNG, matplotlib): faster; the TIFFs, points.ply and texture.png stay"
+
+
+def default(function, name: str):
+    """The default of ``function``'s argument ``name``: an option whose value the library also defaults takes the
+    library's (one default per setting)."""
+    return inspect.signature(function).parameters[name].default
+
+
+def pixels(text: str | None, option: str, *, positive: bool) -> float | None:
+    """A finite number of pixels from an option's text (checked here, so that a bad one is a one-line error)."""
+    if text is None:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or (positive and value <= 0):
+        raise ValueError(f"{option}: expected a {'positive ' if positive else ''}number of pixels, got {text!r}")
+    return value
+
+
+@contextlib.contextmanager
+def one_shot_threads(height: int, width: int):
+    """While one frame of ``height`` x ``width`` runs: torch on one thread for a small frame (its second thread
+    only waits on a start-up-bound run, docs/platform.md §4), restored after; a larger frame is left alone."""
+    if height * width > SMALL_FRAME_PIXELS:
+        yield
+        return
+    import torch  # noqa: PLC0415 - the pipeline imports it anyway
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
