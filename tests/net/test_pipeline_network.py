@@ -112,15 +112,15 @@ def test_identity_network_fails_the_accuracy_criterion(scene, monkeypatch):
 
 def test_cli_process_writes_the_networks_disparity(scene, tmp_path):
     """Oracle: the pipeline's disparity on the same frames (the scene written as a folder and read back
-    unchanged), on the same backend (the CLI runs a small frame on Warp unless told: the twin kernels' float
-    differences move a few tiles by up to ~1e-4 px after refinement and the network). Tolerance: 1e-6 px, NaN
+    unchanged), on the same backend (the library's default for this small frame, Warp, on both sides: the twin
+    kernels' float differences move a few tiles by up to ~1e-4 px after refinement and the network). Tolerance:
+    1e-6 px, NaN
     where the pipeline has NaN; and the file is not the initial targets (>= 90 % of the measured tiles differ by
     more than 1e-3 px)."""
     rendered, frames, result = scene
     folder = save(rendered, tmp_path / "scene", previews=False)
     np.testing.assert_array_equal(load_frames(folder)[0], frames)
-    assert main(["process", str(folder), "--out", str(tmp_path / "out"), "--device", "cpu", "--backend",
-                 "taichi"]) == 0
+    assert main(["process", str(folder), "--out", str(tmp_path / "out"), "--device", "cpu"]) == 0
     written = tifffile.imread(tmp_path / "out" / "disparity.tif")
     np.testing.assert_allclose(written, result["disparity"], rtol=0, atol=1e-6, equal_nan=True)
     assert moved_share(written, result["initial"]) >= 0.9
