@@ -11,7 +11,7 @@ the block's own scratch (convert.convert_camera), then every pair correlated fro
 (correlate.correlate_pair). A block reads back exactly the 8x8 tiles it stored, with the same shape, so every
 lane reads what it wrote itself and no barrier is needed.
 
-Layouts: the task list and the scratch as ``FusedWork``; ``written`` (tiles,) bool; the rest as convert.py and
+Layouts: the task list, the scratch and the ``written`` flags as ``FusedWork``; the rest as convert.py and
 correlate.py, whose argument structs (``ConvertInputs``, ``CorrelateInputs``) ``fused_tiles`` takes as they do.
 """
 
@@ -33,6 +33,7 @@ class FusedWork:
         slots: thread blocks of the launch (its dim), each with its own part of the scratch.
         positions: (U,) int32 the places 0..U-1 of the used colours in the scratch.
         scratch: (slots * cams * U * 4, 8, 8) [slot, cam, used colour, q] one tile's spectra per slot.
+        written: (tiles,) bool the tiles whose correlations an earlier pass may have left non-zero.
     """
 
     tasks: wp.array(dtype=wp.int32)
@@ -40,6 +41,7 @@ class FusedWork:
     slots: int
     positions: wp.array(dtype=wp.int32)
     scratch: wp.array3d(dtype=wp.float32)
+    written: wp.array(dtype=wp.bool)
 
 
 @wp.kernel
@@ -55,10 +57,10 @@ def compact_tasks(
     finite: wp.array(dtype=wp.bool),
     valid: wp.array(dtype=wp.bool),
     corr: wp.array3d(dtype=wp.float32),
-    written: wp.array(dtype=wp.bool),
 ):
     """Per tile: append an active tile to ``work.tasks`` (and mark it ``written``); an inactive one gets
     finite/valid False and zero correlations (zeroed only if ``written``, which it then clears)."""
+    written = work.written
     tile = wp.tid()
     if active[tile]:
         work.tasks[wp.atomic_add(work.count, 0, 1)] = tile

@@ -69,7 +69,7 @@ class WarpBackend:
             fat_zero=cfg.fat_zero, lpf_rb=b.lpf_rb, lpf_corr=b.lpf_corr, lags_cos=b.lags_cos, lags_sin=b.lags_sin,
             freqs_cos=b.freqs_cos, freqs_sin=b.freqs_sin)
         self.fused_work = make_struct(fused.FusedWork, tasks=b.tasks, count=b.count, slots=self.slots,
-                                      positions=b.used_positions, scratch=b.scratch)
+                                      positions=b.used_positions, scratch=b.scratch, written=b.written)
         self.texture_in = None if b.result.texture is None else make_struct(  # texture buffers: textures=True
             texture.TextureInputs, cams=geo.cams, colours=geo.colours, tiles_x=geo.tiles_x, tiles_y=geo.tiles_y,
             ring_rows=b.ring_rows, lpf=b.tex_lpf, inv_cos=b.inv_cos, inv_sin=b.inv_sin, inv_cos_t=b.inv_cos_t,
@@ -168,7 +168,7 @@ class WarpBackend:
         self._thread_launch(fused.reset_count, 1, [self.fused_work], [])
         self._thread_launch(fused.compact_tasks, geo.tiles,
                             [b.active if masked else b.all_active, len(geo.pairs), self.fused_work],
-                            [b.finite, b.valid, b.corr, b.written])
+                            [b.finite, b.valid, b.corr])
         wp.launch_tiled(
             fused.fused_tiles, dim=[self.slots],
             inputs=[self.fused_work, self.convert_in, b.centres, self.correlate_in],
