@@ -18,6 +18,40 @@ from tpnet_gpu.runtime.warp_setup import kernel_module_options
 wp.set_module_options(kernel_module_options())  # hashed with every kernel source (warp_setup)
 
 
+# --- arguments ------------------------------------------------------------------------------------------------
+@wp.struct
+class ConvertInputs:
+    """What converting a camera's window reads besides the tile centres: one processor's padded frames and tables,
+    built once with its buffers (the split and the fused kernels take the same one).
+
+    Fields:
+        padded: (cams, H + 2 PAD, W + 2 PAD) the pair-clamped padded frames (kernels/frames.py).
+        image_height, image_width: H and W, pixels.
+        colours: colours of the frames (3 Bayer R, B, G; 1 mono).
+        masks: (4 * colours, 16, 16) colour masks [parity_y, parity_x, colour].
+        k_rows, n_rows: (8, 16) the frequency k and the pixel n of each element of the vertical basis.
+        n_cols, k_cols: (16, 8) the same for the horizontal basis.
+        kernels: (cams * kernel_rows * kernel_cols * colours * 4, 8, 8) aberration kernels in CLT form
+            [cam, node row, node col, colour, q] (a zero placeholder when ``use_kernels`` is False).
+        kernel_rows, kernel_cols: nodes of the 16-px kernel grid.
+        use_kernels: multiply by the kernels (§5.2).
+    """
+
+    padded: wp.array3d(dtype=wp.float32)
+    image_height: int
+    image_width: int
+    colours: int
+    masks: wp.array3d(dtype=wp.float32)
+    k_rows: wp.array2d(dtype=wp.float32)
+    n_rows: wp.array2d(dtype=wp.float32)
+    n_cols: wp.array2d(dtype=wp.float32)
+    k_cols: wp.array2d(dtype=wp.float32)
+    kernels: wp.array3d(dtype=wp.float32)
+    kernel_rows: int
+    kernel_cols: int
+    use_kernels: bool
+
+
 # --- element functions --------------------------------------------------------------------------------------
 @wp.func
 def basis_cos(k: float, n: float, s: float) -> float:
@@ -85,22 +119,10 @@ def kernel_node(position: float, nodes: int) -> int:
 
 @wp.func
 def convert_camera(
-    padded: wp.array3d(dtype=wp.float32),
+    inputs: ConvertInputs,
     centres: wp.array3d(dtype=wp.float32),
     tile: int,
     cam: int,
-    masks: wp.array3d(dtype=wp.float32),
-    k_rows: wp.array2d(dtype=wp.float32),
-    n_rows: wp.array2d(dtype=wp.float32),
-    n_cols: wp.array2d(dtype=wp.float32),
-    k_cols: wp.array2d(dtype=wp.float32),
-    kernels: wp.array3d(dtype=wp.float32),
-    kernel_rows: int,
-    kernel_cols: int,
-    use_kernels: bool,
-    image_height: int,
-    image_width: int,
-    colours: int,
     colour_list: wp.array(dtype=wp.int32),
     dest: wp.array3d(dtype=wp.float32),
     dest_base: int,
@@ -124,11 +146,11 @@ def convert_camera(
     itl_y = int(wp.floor(py + 0.5))
     sx = float(itl_x) - px
     sy = float(itl_y) - py
-    if itl_x < 0 or itl_y < 0 or itl_x + 16 > image_width or itl_y + 16 > image_height:
+    if itl_x < 0 or itl_y < 0 or itl_x + 16 > inputs.image_width or itl_y + 16 > inputs.image_height:
         inside = False
-    window = wp.tile_load(
-        padded[cam], shape=(16, 16), offset=(window_corner(itl_y, image_height), window_corner(itl_x, image_width))
-    )
+    oy = window_corner(itl_y, inputs.image_height)
+    ox = window_corner(itl_x, inputs.image_width)
+    window = wp.tile_load(inputs.padded[cam], shape=(16, 16), offset=(oy, ox))
     bad = wp.tile_sum(wp.tile_map(non_finite, window))
     if wp.tile_extract(bad, 0) > 0.0:
         finite = False
@@ -138,6 +160,10 @@ def convert_camera(
     if wp.tile_extract(spread, 0) == 0.0:
         inside = False
     # Per-axis bases: rows (8, 16) for the vertical transform, transposed (16, 8) for the horizontal one.
+    k_rows = inputs.k_rows  # a struct's array is loaded as a tile from a local (Warp 1.19: not from the field)
+    n_rows = inputs.n_rows
+    n_cols = inputs.n_cols
+    k_cols = inputs.k_cols
     kr = wp.tile_load(k_rows, shape=(8, 16))
     nr = wp.tile_load(n_rows, shape=(8, 16))
     nc = wp.tile_load(n_cols, shape=(16, 8))
@@ -147,11 +173,12 @@ def convert_camera(
     h_cos = wp.tile_map(basis_cos, kc, nc, wp.tile_full(shape=(16, 8), value=sx, dtype=wp.float32))
     h_sin = wp.tile_map(basis_sin, kc, nc, wp.tile_full(shape=(16, 8), value=sx, dtype=wp.float32))
     parity = (itl_y & 1) * 2 + (itl_x & 1)
-    kny = kernel_node(cy, kernel_rows)
-    knx = kernel_node(cx, kernel_cols)
+    kny = kernel_node(cy, inputs.kernel_rows)
+    knx = kernel_node(cx, inputs.kernel_cols)
     for u in range(colour_list.shape[0]):
         colour = colour_list[u]
-        x = wp.tile_map(wp.mul, window, wp.tile_load(masks[parity * colours + colour], shape=(16, 16)))
+        mask = wp.tile_load(inputs.masks[parity * inputs.colours + colour], shape=(16, 16))
+        x = wp.tile_map(wp.mul, window, mask)
         t_cos = wp.tile_matmul(x, h_cos)  # (16, 8): horizontal cosine transform of every row
         t_sin = wp.tile_matmul(x, h_sin)
         f0 = wp.tile_matmul(v_cos, t_cos)  # CC
@@ -159,12 +186,12 @@ def convert_camera(
         f2 = wp.tile_matmul(v_sin, t_cos)  # CS
         f3 = wp.tile_matmul(v_sin, t_sin)  # SS
         out = dest_base + 4 * u
-        if use_kernels:
-            kb = (((cam * kernel_rows + kny) * kernel_cols + knx) * colours + colour) * 4
-            k0 = wp.tile_load(kernels[kb + 0], shape=(8, 8))
-            k1 = wp.tile_load(kernels[kb + 1], shape=(8, 8))
-            k2 = wp.tile_load(kernels[kb + 2], shape=(8, 8))
-            k3 = wp.tile_load(kernels[kb + 3], shape=(8, 8))
+        if inputs.use_kernels:
+            kb = (((cam * inputs.kernel_rows + kny) * inputs.kernel_cols + knx) * inputs.colours + colour) * 4
+            k0 = wp.tile_load(inputs.kernels[kb + 0], shape=(8, 8))
+            k1 = wp.tile_load(inputs.kernels[kb + 1], shape=(8, 8))
+            k2 = wp.tile_load(inputs.kernels[kb + 2], shape=(8, 8))
+            k3 = wp.tile_load(inputs.kernels[kb + 3], shape=(8, 8))
             wp.tile_store(dest[out + 0], wp.tile_map(kmul_cc, k0, k1, k2, k3, f0, f1, f2, f3))
             wp.tile_store(dest[out + 1], wp.tile_map(kmul_sc, k0, k1, k2, k3, f0, f1, f2, f3))
             wp.tile_store(dest[out + 2], wp.tile_map(kmul_cs, k0, k1, k2, k3, f0, f1, f2, f3))
@@ -180,31 +207,18 @@ def convert_camera(
 # --- kernel -------------------------------------------------------------------------------------------------
 @wp.kernel
 def convert_tiles(
-    padded: wp.array3d(dtype=wp.float32),
+    inputs: ConvertInputs,
     centres: wp.array3d(dtype=wp.float32),
     active: wp.array(dtype=wp.bool),
-    masks: wp.array3d(dtype=wp.float32),
-    k_rows: wp.array2d(dtype=wp.float32),
-    n_rows: wp.array2d(dtype=wp.float32),
-    n_cols: wp.array2d(dtype=wp.float32),
-    k_cols: wp.array2d(dtype=wp.float32),
-    kernels: wp.array3d(dtype=wp.float32),
-    kernel_rows: int,
-    kernel_cols: int,
-    use_kernels: bool,
-    image_height: int,
-    image_width: int,
     colour_list: wp.array(dtype=wp.int32),
     clt: wp.array3d(dtype=wp.float32),
     finite: wp.array(dtype=wp.bool),
     valid: wp.array(dtype=wp.bool),
 ):
-    """One block per tile. padded: (cams, H + 36, W + 36); centres: (tiles, cams, 2); masks: (4 * colours, 16, 16)
-    [parity_y, parity_x, colour]; k_rows/n_rows: (8, 16) and n_cols/k_cols: (16, 8) index tables; kernels:
-    (cams * kernel_rows * kernel_cols * colours * 4, 8, 8); colour_list: (colours,) 0..colours-1; clt out as in
-    the module docstring; finite/valid: (tiles,) - finite: every window and centre finite (else the tile's CLT
-    is zero); valid: finite, active and every window wholly inside the image (else its pixels were read
-    pair-clamped) and not featureless (``convert_camera``)."""
+    """One block per tile. inputs: the frames and tables (``ConvertInputs``); centres: (tiles, cams, 2);
+    colour_list: (colours,) 0..colours-1; clt out as in the module docstring; finite/valid: (tiles,) - finite:
+    every window and centre finite (else the tile's CLT is zero); valid: finite, active and every window wholly
+    inside the image (else its pixels were read pair-clamped) and not featureless (``convert_camera``)."""
     tile = wp.tid()
     if not active[tile]:
         finite[tile] = False
@@ -215,10 +229,8 @@ def convert_tiles(
     all_finite = bool(True)
     all_inside = bool(True)
     for cam in range(cams):
-        cam_finite, cam_inside = convert_camera(
-            padded, centres, tile, cam, masks, k_rows, n_rows, n_cols, k_cols, kernels, kernel_rows, kernel_cols,
-            use_kernels, image_height, image_width, colours, colour_list, clt, (tile * cams + cam) * colours * 4,
-        )
+        cam_finite, cam_inside = convert_camera(inputs, centres, tile, cam, colour_list, clt,
+                                                (tile * cams + cam) * colours * 4)
         all_finite = all_finite and cam_finite
         all_inside = all_inside and cam_inside
     finite[tile] = all_finite

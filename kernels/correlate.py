@@ -22,6 +22,35 @@ NET_SIDE = 9
 NET_CROP = (CORR_SIDE - NET_SIDE) // 2
 
 
+# --- arguments ------------------------------------------------------------------------------------------------
+@wp.struct
+class CorrelateInputs:
+    """What correlating a tile's pairs reads besides the spectra: one processor's pairs, colour weights and
+    tables, built once with its buffers (the split and the fused kernels take the same one).
+
+    Fields:
+        pairs: (P, 2) camera indices (first, second) of each pair.
+        colours: colours of the spectra (3 R, B, G; 1 mono).
+        used, weights: (U,) the colours of non-zero weight (ascending) and their weights.
+        fat_zero: the fat zero of the normalisation (§6.2).
+        lpf_rb, lpf_corr: (8, 8) the R + B low-pass and the final one.
+        lags_cos, lags_sin: (15, 8) 1/2 x lag unfold x DCT-II-e / DST-II-e; freqs_cos, freqs_sin: (8, 15) their
+            transposes.
+    """
+
+    pairs: wp.array2d(dtype=wp.int32)
+    colours: int
+    used: wp.array(dtype=wp.int32)
+    weights: wp.array(dtype=wp.float32)
+    fat_zero: float
+    lpf_rb: wp.array2d(dtype=wp.float32)
+    lpf_corr: wp.array2d(dtype=wp.float32)
+    lags_cos: wp.array2d(dtype=wp.float32)
+    lags_sin: wp.array2d(dtype=wp.float32)
+    freqs_cos: wp.array2d(dtype=wp.float32)
+    freqs_sin: wp.array2d(dtype=wp.float32)
+
+
 # conj(A) * B per frequency (§6.2), one function per output quadrant.
 @wp.func
 def xcorr_cc(a0: float, a1: float, a2: float, a3: float, b0: float, b1: float, b2: float, b3: float) -> float:
@@ -71,22 +100,21 @@ def correlate_pair(
     src: wp.array3d(dtype=wp.float32),
     base_a: int,
     base_b: int,
-    used: wp.array(dtype=wp.int32),
     positions: wp.array(dtype=wp.int32),
-    weights: wp.array(dtype=wp.float32),
-    colours: int,
-    fat_zero: float,
-    lpf_rb: wp.array2d(dtype=wp.float32),
-    lpf_corr: wp.array2d(dtype=wp.float32),
-    lags_cos: wp.array2d(dtype=wp.float32),
-    lags_sin: wp.array2d(dtype=wp.float32),
-    freqs_cos: wp.array2d(dtype=wp.float32),
-    freqs_sin: wp.array2d(dtype=wp.float32),
+    inputs: CorrelateInputs,
     corr: wp.array3d(dtype=wp.float32),
     out: int,
 ):
     """corr[out] (15, 15): the phase correlation of the tiles at src[base_a + 4 positions[u] + q] and
-    src[base_b + ...] over the used colours u (colour used[u] of ``colours``, weight weights[u])."""
+    src[base_b + ...] over the used colours u (colour inputs.used[u] of inputs.colours, weight
+    inputs.weights[u])."""
+    used = inputs.used
+    lpf_rb = inputs.lpf_rb  # a struct's array is loaded as a tile from a local (Warp 1.19: not from the field)
+    lpf_corr = inputs.lpf_corr
+    lags_cos = inputs.lags_cos
+    lags_sin = inputs.lags_sin
+    freqs_cos = inputs.freqs_cos
+    freqs_sin = inputs.freqs_sin
     x0 = wp.tile_zeros(shape=(8, 8), dtype=wp.float32)
     x1 = wp.tile_zeros(shape=(8, 8), dtype=wp.float32)
     x2 = wp.tile_zeros(shape=(8, 8), dtype=wp.float32)
@@ -102,7 +130,7 @@ def correlate_pair(
         b1 = wp.tile_load(src[ib + 1], shape=(8, 8))
         b2 = wp.tile_load(src[ib + 2], shape=(8, 8))
         b3 = wp.tile_load(src[ib + 3], shape=(8, 8))
-        w = wp.tile_full(shape=(8, 8), value=weights[u], dtype=wp.float32)
+        w = wp.tile_full(shape=(8, 8), value=inputs.weights[u], dtype=wp.float32)
         x0 = wp.tile_map(axpy, w, wp.tile_map(xcorr_cc, a0, a1, a2, a3, b0, b1, b2, b3), x0)
         x1 = wp.tile_map(axpy, w, wp.tile_map(xcorr_sc, a0, a1, a2, a3, b0, b1, b2, b3), x1)
         x2 = wp.tile_map(axpy, w, wp.tile_map(xcorr_cs, a0, a1, a2, a3, b0, b1, b2, b3), x2)
@@ -111,14 +139,15 @@ def correlate_pair(
         next_colour = 2
         if u + 1 < used.shape[0]:
             next_colour = used[u + 1]
-        if colours == 3 and used[u] < 2 and next_colour == 2:
+        if inputs.colours == 3 and used[u] < 2 and next_colour == 2:
             rb = wp.tile_load(lpf_rb, shape=(8, 8))
             x0 = wp.tile_map(wp.mul, x0, rb)
             x1 = wp.tile_map(wp.mul, x1, rb)
             x2 = wp.tile_map(wp.mul, x2, rb)
             x3 = wp.tile_map(wp.mul, x3, rb)
     lc = wp.tile_load(lpf_corr, shape=(8, 8))
-    scale = wp.tile_map(inverse_norm, x0, x1, x2, x3, wp.tile_full(shape=(8, 8), value=fat_zero, dtype=wp.float32))
+    fat_zero = wp.tile_full(shape=(8, 8), value=inputs.fat_zero, dtype=wp.float32)
+    scale = wp.tile_map(inverse_norm, x0, x1, x2, x3, fat_zero)
     x0 = wp.tile_map(mul3, x0, scale, lc)
     x1 = wp.tile_map(mul3, x1, scale, lc)
     x2 = wp.tile_map(mul3, x2, scale, lc)
@@ -146,33 +175,23 @@ def zero_correlations(corr: wp.array3d(dtype=wp.float32), first: int, count: int
 def correlate_tiles(
     clt: wp.array3d(dtype=wp.float32),
     finite: wp.array(dtype=wp.bool),
-    pairs: wp.array2d(dtype=wp.int32),
     cams: int,
-    colours: int,
-    used: wp.array(dtype=wp.int32),
-    weights: wp.array(dtype=wp.float32),
-    fat_zero: float,
-    lpf_rb: wp.array2d(dtype=wp.float32),
-    lpf_corr: wp.array2d(dtype=wp.float32),
-    lags_cos: wp.array2d(dtype=wp.float32),
-    lags_sin: wp.array2d(dtype=wp.float32),
-    freqs_cos: wp.array2d(dtype=wp.float32),
-    freqs_sin: wp.array2d(dtype=wp.float32),
+    inputs: CorrelateInputs,
     corr: wp.array3d(dtype=wp.float32),
 ):
-    """One block per tile. pairs: (P, 2) camera indices (first, second); used/weights: (U,) the colours of
-    non-zero weight (ascending) and their weights; lpf_*: (8, 8); lags_*: (15, 8) = 1/2 x unfold x DCT-II-e /
-    DST-II-e, freqs_* = their transposes (8, 15); corr out: (tiles * P, 15, 15), zero for tiles whose CLT is not
-    finite."""
+    """One block per tile. inputs: the pairs, colours and tables (``CorrelateInputs``); corr out: (tiles * P, 15,
+    15), zero for tiles whose CLT is not finite."""
     tile = wp.tid()
-    npairs = pairs.shape[0]
+    npairs = inputs.pairs.shape[0]
     if not finite[tile]:
         zero_correlations(corr, tile * npairs, npairs)
         return
+    per_cam = inputs.colours * 4
     for p in range(npairs):
-        correlate_pair(clt, (tile * cams + pairs[p, 0]) * colours * 4, (tile * cams + pairs[p, 1]) * colours * 4,
-                       used, used, weights, colours, fat_zero, lpf_rb, lpf_corr, lags_cos, lags_sin, freqs_cos,
-                       freqs_sin, corr, tile * npairs + p)
+        base_a = (tile * cams + inputs.pairs[p, 0]) * per_cam
+        base_b = (tile * cams + inputs.pairs[p, 1]) * per_cam
+        # the CLT holds every colour: colour used[u] is at place used[u]
+        correlate_pair(clt, base_a, base_b, inputs.used, inputs, corr, tile * npairs + p)
 
 
 @wp.func

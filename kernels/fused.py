@@ -11,40 +11,59 @@ the block's own scratch (convert.convert_camera), then every pair correlated fro
 (correlate.correlate_pair). A block reads back exactly the 8x8 tiles it stored, with the same shape, so every
 lane reads what it wrote itself and no barrier is needed.
 
-Layouts: ``tasks`` (tiles,) int32; ``count`` (1,) int32; ``written`` (tiles,) bool; ``scratch`` (slots * cams * U * 4, 8, 8)
-[slot, cam, used colour, q]; the rest as convert.py and correlate.py.
+Layouts: the task list, the scratch and the ``written`` flags as ``FusedWork``; the rest as convert.py and
+correlate.py, whose argument structs (``ConvertInputs``, ``CorrelateInputs``) ``fused_tiles`` takes as they do.
 """
 
 import warp as wp
 
-from tpnet_gpu.kernels.convert import convert_camera
-from tpnet_gpu.kernels.correlate import correlate_pair, zero_correlations
+from tpnet_gpu.kernels.convert import ConvertInputs, convert_camera
+from tpnet_gpu.kernels.correlate import CorrelateInputs, correlate_pair, zero_correlations
 from tpnet_gpu.runtime.warp_setup import kernel_module_options
 
 wp.set_module_options(kernel_module_options())  # hashed with every kernel source (warp_setup)
 
 
+@wp.struct
+class FusedWork:
+    """The fused pass's own buffers, built once when the backend allocates its scratch.
+
+    Fields:
+        tasks: (tiles,) int32 the active tiles (``compact_tasks``); count: (1,) int32 how many.
+        slots: thread blocks of the launch (its dim), each with its own part of the scratch.
+        positions: (U,) int32 the places 0..U-1 of the used colours in the scratch.
+        scratch: (slots * cams * U * 4, 8, 8) [slot, cam, used colour, q] one tile's spectra per slot.
+        written: (tiles,) bool the tiles whose correlations an earlier pass may have left non-zero.
+    """
+
+    tasks: wp.array(dtype=wp.int32)
+    count: wp.array(dtype=wp.int32)
+    slots: int
+    positions: wp.array(dtype=wp.int32)
+    scratch: wp.array3d(dtype=wp.float32)
+    written: wp.array(dtype=wp.bool)
+
+
 @wp.kernel
-def reset_count(count: wp.array(dtype=wp.int32)):
-    count[0] = 0
+def reset_count(work: FusedWork):
+    work.count[0] = 0
 
 
 @wp.kernel
 def compact_tasks(
     active: wp.array(dtype=wp.bool),
     npairs: int,
-    tasks: wp.array(dtype=wp.int32),
-    count: wp.array(dtype=wp.int32),
+    work: FusedWork,
     finite: wp.array(dtype=wp.bool),
     valid: wp.array(dtype=wp.bool),
     corr: wp.array3d(dtype=wp.float32),
-    written: wp.array(dtype=wp.bool),
 ):
-    """Per tile: append an active tile to ``tasks`` (and mark it ``written``); an inactive one gets finite/valid
-    False and zero correlations (zeroed only if ``written``, which it then clears)."""
+    """Per tile: append an active tile to ``work.tasks`` (and mark it ``written``); an inactive one gets
+    finite/valid False and zero correlations (zeroed only if ``written``, which it then clears)."""
+    written = work.written
     tile = wp.tid()
     if active[tile]:
-        tasks[wp.atomic_add(count, 0, 1)] = tile
+        work.tasks[wp.atomic_add(work.count, 0, 1)] = tile
         written[tile] = True
         return
     finite[tile] = False
@@ -60,66 +79,37 @@ def compact_tasks(
 
 @wp.kernel
 def fused_tiles(
-    tasks: wp.array(dtype=wp.int32),
-    count: wp.array(dtype=wp.int32),
-    slots: int,
-    padded: wp.array3d(dtype=wp.float32),
+    work: FusedWork,
+    convert: ConvertInputs,
     centres: wp.array3d(dtype=wp.float32),
-    masks: wp.array3d(dtype=wp.float32),
-    k_rows: wp.array2d(dtype=wp.float32),
-    n_rows: wp.array2d(dtype=wp.float32),
-    n_cols: wp.array2d(dtype=wp.float32),
-    k_cols: wp.array2d(dtype=wp.float32),
-    kernels: wp.array3d(dtype=wp.float32),
-    kernel_rows: int,
-    kernel_cols: int,
-    use_kernels: bool,
-    image_height: int,
-    image_width: int,
-    colours: int,
-    used: wp.array(dtype=wp.int32),
-    positions: wp.array(dtype=wp.int32),
-    weights: wp.array(dtype=wp.float32),
-    pairs: wp.array2d(dtype=wp.int32),
-    fat_zero: float,
-    lpf_rb: wp.array2d(dtype=wp.float32),
-    lpf_corr: wp.array2d(dtype=wp.float32),
-    lags_cos: wp.array2d(dtype=wp.float32),
-    lags_sin: wp.array2d(dtype=wp.float32),
-    freqs_cos: wp.array2d(dtype=wp.float32),
-    freqs_sin: wp.array2d(dtype=wp.float32),
-    scratch: wp.array3d(dtype=wp.float32),
+    correlate: CorrelateInputs,
     corr: wp.array3d(dtype=wp.float32),
     finite: wp.array(dtype=wp.bool),
     valid: wp.array(dtype=wp.bool),
 ):
-    """Launched with dim ``slots``; used/positions/weights (U,): the used colours, their places 0..U-1 in the
-    scratch and weights; the other arguments as convert_tiles and correlate_tiles."""
+    """Launched with dim ``work.slots``; the other arguments as convert_tiles and correlate_tiles."""
     slot = wp.tid()
     cams = centres.shape[1]
-    npairs = pairs.shape[0]
-    n_used = used.shape[0]
+    npairs = correlate.pairs.shape[0]
+    n_used = correlate.used.shape[0]
     block = slot * cams * n_used * 4
     i = slot
-    while i < count[0]:
-        tile = tasks[i]
+    while i < work.count[0]:
+        tile = work.tasks[i]
         all_finite = bool(True)
         all_inside = bool(True)
         for cam in range(cams):
-            cam_finite, cam_inside = convert_camera(
-                padded, centres, tile, cam, masks, k_rows, n_rows, n_cols, k_cols, kernels, kernel_rows,
-                kernel_cols, use_kernels, image_height, image_width, colours, used, scratch,
-                block + cam * n_used * 4,
-            )
+            cam_finite, cam_inside = convert_camera(convert, centres, tile, cam, correlate.used, work.scratch,
+                                                    block + cam * n_used * 4)
             all_finite = all_finite and cam_finite
             all_inside = all_inside and cam_inside
         finite[tile] = all_finite
         valid[tile] = all_finite and all_inside
         if all_finite:
             for p in range(npairs):
-                correlate_pair(scratch, block + pairs[p, 0] * n_used * 4, block + pairs[p, 1] * n_used * 4, used,
-                               positions, weights, colours, fat_zero, lpf_rb, lpf_corr, lags_cos, lags_sin,
-                               freqs_cos, freqs_sin, corr, tile * npairs + p)
+                base_a = block + correlate.pairs[p, 0] * n_used * 4
+                base_b = block + correlate.pairs[p, 1] * n_used * 4
+                correlate_pair(work.scratch, base_a, base_b, work.positions, correlate, corr, tile * npairs + p)
         else:
             zero_correlations(corr, tile * npairs, npairs)
-        i += slots
+        i += work.slots

@@ -36,6 +36,15 @@ ROW_PARTS = (
     [[-PHASE_PARTS[1][k][n] for k in range(N)] + [PHASE_PARTS[0][k][n] for k in range(N)] for n in range(WINDOW)],
 )
 
+# The conversion's frames and tables, one pack per processor (kernels/convert.ConvertInputs without the bases'
+# index tables: the bases are compile-time here): padded (cams, H + 2 PAD, W + 2 PAD) frames; image_height,
+# image_width: H and W, px; colours (3 R, B, G; 1 mono); masks (4 * colours, 16, 16) [parity_y, parity_x, colour],
+# 2-periodic along rows; kernels (cams * kernel_rows * kernel_cols * colours * 4, 8) rows of 8 (V8) of the
+# aberration kernels [cam, node row, node col, colour, q, ky]; kernel_rows, kernel_cols: the 16-px kernel grid's
+# nodes; use_kernels (0 / 1): multiply by them (§5.2).
+ConvertInputs = ti.types.argpack(padded=F32_3D, image_height=ti.i32, image_width=ti.i32, colours=ti.i32,
+                                 masks=F32_3D, kernels=V8_2D, kernel_rows=ti.i32, kernel_cols=ti.i32,
+                                 use_kernels=ti.i32)
 # Where one camera's window lies: padded-frame corner, residual shifts, Bayer parity, kernel-grid node, flags.
 CameraWindow = ti.types.struct(oy=ti.i32, ox=ti.i32, sx=ti.f32, sy=ti.f32, parity=ti.i32, kny=ti.i32, knx=ti.i32,
                                finite=ti.i32, inside=ti.i32)
@@ -60,8 +69,7 @@ def kernel_node(position: ti.f32, nodes: ti.i32) -> ti.i32:
 
 
 @ti.func
-def camera_window(centres: ti.template(), tile: ti.i32, cam: ti.i32, image_height: ti.i32, image_width: ti.i32,
-                  kernel_rows: ti.i32, kernel_cols: ti.i32) -> CameraWindow:
+def camera_window(inputs: ti.template(), centres: ti.template(), tile: ti.i32, cam: ti.i32) -> CameraWindow:
     """The window of camera ``cam`` at ``tile`` (a non-finite centre reads at 0 and clears ``finite``)."""
     cx = centres[tile, cam, 0]
     cy = centres[tile, cam, 1]
@@ -74,13 +82,15 @@ def camera_window(centres: ti.template(), tile: ti.i32, cam: ti.i32, image_heigh
     py = ti.math.clamp(cy, -CENTRE_LIMIT, CENTRE_LIMIT) - float(HALF_WINDOW)
     itl_x = ti.i32(ti.floor(px + 0.5))
     itl_y = ti.i32(ti.floor(py + 0.5))
+    height = inputs.image_height
+    width = inputs.image_width
     inside = 1
-    if itl_x < 0 or itl_y < 0 or itl_x + WINDOW > image_width or itl_y + WINDOW > image_height:
+    if itl_x < 0 or itl_y < 0 or itl_x + WINDOW > width or itl_y + WINDOW > height:
         inside = 0
-    return CameraWindow(oy=window_corner(itl_y, image_height), ox=window_corner(itl_x, image_width),
+    return CameraWindow(oy=window_corner(itl_y, height), ox=window_corner(itl_x, width),
                         sx=ti.cast(itl_x, ti.f32) - px, sy=ti.cast(itl_y, ti.f32) - py,
-                        parity=(itl_y & 1) * 2 + (itl_x & 1), kny=kernel_node(cy, kernel_rows),
-                        knx=kernel_node(cx, kernel_cols), finite=finite, inside=inside)
+                        parity=(itl_y & 1) * 2 + (itl_x & 1), kny=kernel_node(cy, inputs.kernel_rows),
+                        knx=kernel_node(cx, inputs.kernel_cols), finite=finite, inside=inside)
 
 
 @ti.func
@@ -158,20 +168,20 @@ def forward_colour(padded: ti.template(), cam: ti.i32, oy: ti.i32, ox: ti.i32, m
 
 
 @ti.func
-def store_clt(g: ti.template(), kernels: ti.template(), kb: ti.i32, use_kernels: ti.i32, dest: ti.template(),
-              out: ti.i32):
-    """Write ``g``'s 4 quadrants to dest[out + q], times the aberration kernel kernels[kb + q] (bicomplex, §5.2)
-    when ``use_kernels``; ``dest`` and ``kernels`` a row at a time (rows of 8 as vectors, taichi_types.V8)."""
+def store_clt(g: ti.template(), inputs: ti.template(), kb: ti.i32, dest: ti.template(), out: ti.i32):
+    """Write ``g``'s 4 quadrants to dest[out + q], times the aberration kernel inputs.kernels[kb + q] (bicomplex,
+    §5.2) when ``inputs.use_kernels``; ``dest`` and the kernels a row at a time (rows of 8 as vectors,
+    taichi_types.V8)."""
     for ky in range(N):
         f0 = ti.Vector([g[ky, kx] for kx in ti.static(range(N))])  # CC
         f1 = ti.Vector([g[ky, N + kx] for kx in ti.static(range(N))])  # SC (horizontal sine)
         f2 = ti.Vector([g[N + ky, kx] for kx in ti.static(range(N))])  # CS (vertical sine)
         f3 = ti.Vector([g[N + ky, N + kx] for kx in ti.static(range(N))])  # SS
-        if use_kernels:
-            k0 = kernels[kb + 0, ky]
-            k1 = kernels[kb + 1, ky]
-            k2 = kernels[kb + 2, ky]
-            k3 = kernels[kb + 3, ky]
+        if inputs.use_kernels:
+            k0 = inputs.kernels[kb + 0, ky]
+            k1 = inputs.kernels[kb + 1, ky]
+            k2 = inputs.kernels[kb + 2, ky]
+            k3 = inputs.kernels[kb + 3, ky]
             dest[out + 0, ky] = k0 * f0 - k1 * f1 - k2 * f2 + k3 * f3
             dest[out + 1, ky] = k0 * f1 + k1 * f0 - k2 * f3 - k3 * f2
             dest[out + 2, ky] = k0 * f2 + k2 * f0 - k1 * f3 - k3 * f1
@@ -184,34 +194,19 @@ def store_clt(g: ti.template(), kernels: ti.template(), kb: ti.i32, use_kernels:
 
 
 @ti.func
-def kernel_base(cam: ti.i32, win: ti.template(), kernel_rows: ti.i32, kernel_cols: ti.i32, colours: ti.i32,
-                colour: ti.i32) -> ti.i32:
+def kernel_base(inputs: ti.template(), cam: ti.i32, win: ti.template(), colour: ti.i32) -> ti.i32:
     """First of the 4 kernel quadrants of (cam, the window's kernel-grid node, colour)."""
-    return (((cam * kernel_rows + win.kny) * kernel_cols + win.knx) * colours + colour) * 4
+    return (((cam * inputs.kernel_rows + win.kny) * inputs.kernel_cols + win.knx) * inputs.colours + colour) * 4
 
 
 # --- kernel -------------------------------------------------------------------------------------------------
 @ti.kernel
-def convert_tiles(
-    padded: F32_3D,
-    centres: F32_3D,
-    active: U8_1D,
-    masks: F32_3D,
-    kernels: V8_2D,
-    kernel_rows: ti.i32,
-    kernel_cols: ti.i32,
-    use_kernels: ti.i32,
-    image_height: ti.i32,
-    image_width: ti.i32,
-    colours: ti.i32,
-    clt: V8_2D,
-    finite: U8_1D,
-    valid: U8_1D,
-):
-    """One thread per tile; arguments as kernels/convert.convert_tiles except the bases (built in the kernel from the
-    compile-time parts of ``operators.shifted_basis_parts`` instead of the index tables); masks must be 2-periodic along rows (Bayer or mono). finite/valid out:
-    (tiles,) uint8."""
+def convert_tiles(inputs: ConvertInputs, centres: F32_3D, active: U8_1D, clt: V8_2D, finite: U8_1D, valid: U8_1D):
+    """One thread per tile; arguments as kernels/convert.convert_tiles except the bases (built in the kernel from
+    the compile-time parts of ``operators.shifted_basis_parts`` instead of the index tables) and the colours (all
+    of ``inputs.colours``). finite/valid out: (tiles,) uint8."""
     cams = centres.shape[1]
+    n_colours = inputs.colours  # (a pack's member names are reserved in a kernel: taichi_types.py)
     for tile in range(centres.shape[0]):
         all_finite = 1
         all_inside = 1
@@ -220,15 +215,16 @@ def convert_tiles(
             all_inside = 0
         else:
             for cam in range(cams):
-                win = camera_window(centres, tile, cam, image_height, image_width, kernel_rows, kernel_cols)
-                flags = window_flags(padded, cam, win.oy, win.ox)
+                win = camera_window(inputs, centres, tile, cam)
+                flags = window_flags(inputs.padded, cam, win.oy, win.ox)
                 all_finite *= win.finite * flags[0]
                 all_inside *= win.inside * flags[1]
                 bx = axis_basis(win.sx)
                 by = axis_basis(win.sy)
-                for colour in range(colours):
-                    g = forward_colour(padded, cam, win.oy, win.ox, masks, win.parity * colours + colour, bx, by)
-                    store_clt(g, kernels, kernel_base(cam, win, kernel_rows, kernel_cols, colours, colour),
-                              use_kernels, clt, ((tile * cams + cam) * colours + colour) * 4)
+                for colour in range(n_colours):
+                    mask = win.parity * n_colours + colour
+                    g = forward_colour(inputs.padded, cam, win.oy, win.ox, inputs.masks, mask, bx, by)
+                    store_clt(g, inputs, kernel_base(inputs, cam, win, colour), clt,
+                              ((tile * cams + cam) * n_colours + colour) * 4)
         finite[tile] = ti.u8(all_finite)
         valid[tile] = ti.u8(all_finite * all_inside)

@@ -33,6 +33,14 @@ _INDEX, _SIGN = operators.unfold_gather()
 UNFOLD_INDEX, UNFOLD_SIGN = _INDEX.tolist(), _SIGN.tolist()  # [sine][lag + 7]
 HALF = N // 2
 
+# The correlation's pairs, colours and settings, one pack per processor (kernels/correlate.CorrelateInputs without
+# the transforms' tables: compile-time constants here): pairs (P, 2) camera indices (first, second); colours (3 R,
+# B, G; 1 mono); used, weights (U,) the colours of non-zero weight (ascending) and their weights; fat_zero (§6.2);
+# lpf_rb, lpf_corr (8,) rows of 8 (V8) of the R + B and the final low-pass; net_offset: the network layers' pair
+# combination (``combine``; the fused kernel makes the layers).
+CorrelateInputs = ti.types.argpack(pairs=I32_2D, colours=ti.i32, used=I32_1D, weights=F32_1D, fat_zero=ti.f32,
+                                   lpf_rb=V8_1D, lpf_corr=V8_1D, net_offset=ti.f32)
+
 
 @ti.func
 def inverse_norm(x0: ti.f32, x1: ti.f32, x2: ti.f32, x3: ti.f32, fat_zero: ti.f32) -> ti.f32:
@@ -48,14 +56,13 @@ def inverse_norm(x0: ti.f32, x1: ti.f32, x2: ti.f32, x3: ti.f32, fat_zero: ti.f3
 
 
 @ti.func
-def spectrum_row(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.template(), positions: ti.template(),
-                 weights: ti.template(), has_rb: ti.i32, fat_zero: ti.f32, lpf_rb: ti.template(),
-                 lpf_corr: ti.template(), ky: ti.i32):
+def spectrum_row(src: ti.template(), base_a: ti.i32, base_b: ti.i32, positions: ti.template(), inputs: ti.template(),
+                 has_rb: ti.i32, ky: ti.i32):
     """(4, 8) [q, kx]: row ``ky`` of the normalised, low-passed correlation spectrum of the tiles at
-    src[base_a + 4 positions[u] + q] and src[base_b + ...] over the used colours u (colour used[u], weight
-    weights[u]); ``has_rb``: R or B is among them (their sum is low-passed before green is added, §6.2).
-    ``src``, ``lpf_rb`` and ``lpf_corr`` are read a row at a time (rows of 8 as vectors, taichi_types.V8): the
-    row's 8 frequencies are vector lanes throughout (the same arithmetic per frequency as one at a time)."""
+    src[base_a + 4 positions[u] + q] and src[base_b + ...] over the used colours u (colour inputs.used[u], weight
+    inputs.weights[u]); ``has_rb``: R or B is among them (their sum is low-passed before green is added, §6.2).
+    ``src`` and the low-passes are read a row at a time (rows of 8 as vectors, taichi_types.V8): the row's 8
+    frequencies are vector lanes throughout (the same arithmetic per frequency as one at a time)."""
     x0 = ti.Vector.zero(ti.f32, N)
     x1 = ti.Vector.zero(ti.f32, N)
     x2 = ti.Vector.zero(ti.f32, N)
@@ -64,11 +71,11 @@ def spectrum_row(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.te
     r1 = ti.Vector.zero(ti.f32, N)
     r2 = ti.Vector.zero(ti.f32, N)
     r3 = ti.Vector.zero(ti.f32, N)
-    for u in range(used.shape[0]):
+    for u in range(inputs.used.shape[0]):
         ia = base_a + 4 * positions[u]
         ib = base_b + 4 * positions[u]
-        w_rb = ti.select(has_rb != 0 and used[u] < 2, weights[u], 0.0)
-        w = weights[u] - w_rb
+        w_rb = ti.select(has_rb != 0 and inputs.used[u] < 2, inputs.weights[u], 0.0)
+        w = inputs.weights[u] - w_rb
         a0, a1, a2, a3 = src[ia + 0, ky], src[ia + 1, ky], src[ia + 2, ky], src[ia + 3, ky]
         b0, b1, b2, b3 = src[ib + 0, ky], src[ib + 1, ky], src[ib + 2, ky], src[ib + 3, ky]
         p0 = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3  # conj(A) * B per frequency (§6.2)
@@ -85,13 +92,14 @@ def spectrum_row(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.te
             r2 += w_rb * p2
             r3 += w_rb * p3
     if has_rb != 0:  # without R and B this adds 0 * lpf_rb: skipped
-        low = lpf_rb[ky]
+        low = inputs.lpf_rb[ky]
         x0 = r0 * low + x0
         x1 = r1 * low + x1
         x2 = r2 * low + x2
         x3 = r3 * low + x3
     # The 8 norms as one vector (a packed 1/sqrt; ~7 % of a pass on CPU, tile_processor.md §10); the scaled
     # scalar form only where the unscaled squares could under- or overflow, NaN, or 0.
+    fat_zero = inputs.fat_zero
     energy = fat_zero * fat_zero + x0 * x0 + x1 * x1 + x2 * x2 + x3 * x3
     inv = 1.0 / ti.sqrt(energy)
     # 1 / 0 per lane, 0 for NaN (as integers: Taichi 1.7 misreads single lanes, any() and all() of a comparison's
@@ -101,7 +109,7 @@ def spectrum_row(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.te
         for kx in ti.static(range(N)):
             if usual[kx] == 0:
                 inv[kx] = inverse_norm(x0[kx], x1[kx], x2[kx], x3[kx], fat_zero)
-    scale = inv * lpf_corr[ky]
+    scale = inv * inputs.lpf_corr[ky]
     return ti.Matrix.rows([x0 * scale, x1 * scale, x2 * scale, x3 * scale])
 
 
@@ -112,24 +120,23 @@ def dtt2e_column(sine: ti.template(), k: ti.template()):
 
 
 @ti.func
-def correlate_pair(src: ti.template(), base_a: ti.i32, base_b: ti.i32, used: ti.template(), positions: ti.template(),
-                   weights: ti.template(), colours: ti.i32, fat_zero: ti.f32, lpf_rb: ti.template(),
-                   lpf_corr: ti.template(), corr: ti.template(), out: ti.i32):
+def correlate_pair(src: ti.template(), base_a: ti.i32, base_b: ti.i32, positions: ti.template(), inputs: ti.template(),
+                   corr: ti.template(), out: ti.i32):
     """corr[out] (15 x 15, flat): the phase correlation of one pair = sum_q U_{q>>1} D_{q>>1} X_q D_{q&1}^T
     U_{q&1}^T, X the spectrum (``spectrum_row``), D the 8-point DCT-II-e / DST-II-e (x 1/2) on both sides, U the
     unfold as a signed gather (``operators.unfold_gather``). Rows are vectors throughout: each spectrum row goes
     through its column-side transform (a sum of constant columns of D times the row's frequencies) as it is made,
     so the spectrum is never stored; the row side sums constant multiples of the folded rows of P_q."""
     has_rb = 0
-    if colours == 3:
-        for u in range(used.shape[0]):
-            if used[u] < 2:
+    if inputs.colours == 3:
+        for u in range(inputs.used.shape[0]):
+            if inputs.used[u] < 2:
                 has_rb = 1
     # p[q][ky]: row ky of P_q = X_q D_{q&1}^T, a vector over the column-side frequency (a row-indexed matrix: ky
     # is a loop variable; unrolling that loop made the kernel compile 4x longer for 5 % speed)
     p = [ti.Matrix.zero(ti.f32, N, N) for _ in ti.static(range(4))]
     for ky in range(N):
-        x = spectrum_row(src, base_a, base_b, used, positions, weights, has_rb, fat_zero, lpf_rb, lpf_corr, ky)
+        x = spectrum_row(src, base_a, base_b, positions, inputs, has_rb, ky)
         for q in ti.static(range(4)):
             row = ti.Vector.zero(ti.f32, N)
             for kx in ti.static(range(N)):
@@ -168,32 +175,21 @@ def zero_correlations(corr: ti.template(), first: ti.i32, count: ti.i32):
 
 
 @ti.kernel
-def correlate_tiles(
-    clt: V8_2D,
-    finite: U8_1D,
-    pairs: I32_2D,
-    cams: ti.i32,
-    colours: ti.i32,
-    used: I32_1D,
-    weights: F32_1D,
-    fat_zero: ti.f32,
-    lpf_rb: V8_1D,
-    lpf_corr: V8_1D,
-    corr: F32_1D,
-):
-    """One thread per (tile, pair); arguments as kernels/correlate.correlate_tiles except the colours: used
-    (U,) the colours of non-zero weight, weights (U,) theirs; the inverse transform and the lag unfold are
-    compile-time constants (``operators.half_dtt2e``, ``operators.unfold_gather``). corr out: (tiles * P, 15,
-    15) flat, zero for tiles whose CLT is not finite."""
-    npairs = pairs.shape[0]
+def correlate_tiles(clt: V8_2D, finite: U8_1D, cams: ti.i32, inputs: CorrelateInputs, corr: F32_1D):
+    """One thread per (tile, pair); arguments as kernels/correlate.correlate_tiles; the inverse transform and the
+    lag unfold are compile-time constants (``operators.half_dtt2e``, ``operators.unfold_gather``). corr out: (tiles
+    * P, 15, 15) flat, zero for tiles whose CLT is not finite."""
+    npairs = inputs.pairs.shape[0]
+    per_cam = inputs.colours * 4
     for tile, p in ti.ndrange(finite.shape[0], npairs):
         out = tile * npairs + p
         if finite[tile] == 0:
             zero_correlations(corr, out, 1)
         else:
-            base_a = (tile * cams + pairs[p, 0]) * colours * 4
-            base_b = (tile * cams + pairs[p, 1]) * colours * 4
-            correlate_pair(clt, base_a, base_b, used, used, weights, colours, fat_zero, lpf_rb, lpf_corr, corr, out)
+            base_a = (tile * cams + inputs.pairs[p, 0]) * per_cam
+            base_b = (tile * cams + inputs.pairs[p, 1]) * per_cam
+            # the CLT holds every colour: colour used[u] is at place used[u]
+            correlate_pair(clt, base_a, base_b, inputs.used, inputs, corr, out)
 
 
 @ti.func

@@ -32,6 +32,28 @@ ROW8 = ti.types.ndarray(dtype=ti.types.vector(N, ti.f32), ndim=2)
 ROW16 = ti.types.ndarray(dtype=ti.types.vector(SIDE, ti.f32), ndim=2)
 ROW16_1D = ti.types.ndarray(dtype=ti.types.vector(SIDE, ti.f32), ndim=1)
 
+# texture_combine: one thread per run of LANES pixels of a tile row, the run's pixels as vector lanes. Straight-line
+# lane code (selects instead of branches, exp_f32 instead of the libm call) lets the compiler turn each step into
+# LANES-wide vector instructions: the camera weights' ten exponentials per pixel were most of the combine's time
+# (measured: 4 lanes -25 %; 2 lanes gain nothing). With Taichi's matrices kept as LLVM vectors (taichi_setup.py),
+# 8 lanes take 0.66x the time of 4 (5 MPix combine 0.53 -> 0.35 s); 16 lanes crash (rows of 64 bytes at 32-byte
+# offsets: the vector loads assume alignment).
+LANES = 8
+RUNS = ti.types.ndarray(dtype=ti.types.vector(LANES, ti.f32), ndim=3)  # (n, 16, 16 / LANES) runs of pixels
+RUNS_2D = ti.types.ndarray(dtype=ti.types.vector(LANES, ti.f32), ndim=2)  # (16, 16 / LANES)
+
+# The texture's grid, settings and tables, one pack per processor (kernels/texture.TextureInputs without cams and
+# colours, compile-time here, and the transposed operators): tiles_x, tiles_y: the frame's tile grid; ring_rows:
+# tile rows of the ``rgba`` ring; lpf (colours, 8) rows of 8 of each colour's low-pass; inv_cos, inv_sin (16, 8)
+# the inverse operators; inv_window2 (16,) rows of 16 of 1 / W2; scale_shot, min_shot: the shot-noise compression;
+# offsets (cams, 2) the cameras' offsets in baselines; colour_weights (colours,); channel_of_colour (colours,)
+# int32 output channels; diff_sigma, weight_floor (§7.3); dust_remove (0 / 1); output_gain; window2 (16, 16 /
+# LANES) runs of W2.
+TextureInputs = ti.types.argpack(tiles_x=ti.i32, tiles_y=ti.i32, ring_rows=ti.i32, lpf=ROW8, inv_cos=F32_2D,
+                                 inv_sin=F32_2D, inv_window2=ROW16_1D, scale_shot=ti.f32, min_shot=ti.f32,
+                                 offsets=F32_2D, colour_weights=F32_1D, channel_of_colour=I32_1D, diff_sigma=ti.f32,
+                                 weight_floor=ti.f32, dust_remove=ti.i32, output_gain=ti.f32, window2=RUNS_2D)
+
 
 @ti.func
 def inverse_column(sine: ti.template(), k: ti.template()):
@@ -65,25 +87,13 @@ def shift(row, by: ti.template()):
 
 
 @ti.kernel
-def texture_imclt(
-    clt: ROW8,
-    finite: U8_1D,
-    cams: ti.template(),
-    colours: ti.template(),
-    lpf: ROW8,
-    inv_cos: F32_2D,
-    inv_sin: F32_2D,
-    inv_window2: ROW16_1D,
-    scale_shot: ti.f32,
-    min_shot: ti.f32,
-    pix: ROW16,
-    cmp: ROW16,
-):
-    """One thread per (tile, camera, colour) of finite tiles. lpf: (colours, 8, 8); inv_*: (16, 8) per-axis
-    inverse operators; pix out: T = sum_q G_{q>>1} (L X_q) G_{q&1}^T (16, 16); cmp out: M / W2 =
+def texture_imclt(clt: ROW8, finite: U8_1D, cams: ti.template(), colours: ti.template(), inputs: TextureInputs,
+                  pix: ROW16, cmp: ROW16):
+    """One thread per (tile, camera, colour) of finite tiles, the low-passes and inverse operators from ``inputs``
+    (``TextureInputs``); pix out: T = sum_q G_{q>>1} (L X_q) G_{q&1}^T (16, 16); cmp out: M / W2 =
     compress(filter3x3(T / W2)) on the 14x14 interior (R, B: [1 2 1; 2 4 2; 1 2 1] / 16; G: [0 1 0; 1 4 1;
     0 1 0] / 8), border unfiltered; mono: T / W2."""
-    linear = scale_shot / ti.sqrt(min_shot)
+    linear = inputs.scale_shot / ti.sqrt(inputs.min_shot)
     for tile, cam, colour in ti.ndrange(finite.shape[0], cams, colours):
         if finite[tile] != 0:
             base = ((tile * cams + cam) * colours + colour) * 4
@@ -92,7 +102,7 @@ def texture_imclt(
             u_cos = [ti.Vector.zero(ti.f32, SIDE) for _ in ti.static(range(N))]  # vertical cosine rows: U_0 + U_1
             u_sin = [ti.Vector.zero(ti.f32, SIDE) for _ in ti.static(range(N))]  # vertical sine rows: U_2 + U_3
             for ky in ti.static(range(N)):
-                low = lpf[colour, ky]
+                low = inputs.lpf[colour, ky]
                 r0 = clt[base + 0, ky] * low
                 r1 = clt[base + 1, ky] * low
                 r2 = clt[base + 2, ky] * low
@@ -112,31 +122,22 @@ def texture_imclt(
             for r in range(SIDE):
                 row = ti.Vector.zero(ti.f32, SIDE)
                 for ky in ti.static(range(N)):
-                    row += inv_cos[r, ky] * u_cos[ky] + inv_sin[r, ky] * u_sin[ky]
+                    row += inputs.inv_cos[r, ky] * u_cos[ky] + inputs.inv_sin[r, ky] * u_sin[ky]
                 pix[out, r] = row
-                below = row * inv_window2[r]
+                below = row * inputs.inv_window2[r]
                 if ti.static(colours == 1):
                     cmp[out, r] = below
                 elif r == 0:  # border row: unfiltered
-                    cmp[out, 0] = compress_row(below, scale_shot, min_shot, linear)
+                    cmp[out, 0] = compress_row(below, inputs.scale_shot, inputs.min_shot, linear)
                 elif r > 1:
                     done = demosaic_row(above, mid, below, centre, corner)
-                    cmp[out, r - 1] = compress_row(done, scale_shot, min_shot, linear)
+                    cmp[out, r - 1] = compress_row(done, inputs.scale_shot, inputs.min_shot, linear)
                 above = mid
                 mid = below
             if ti.static(colours != 1):
-                cmp[out, SIDE - 1] = compress_row(mid, scale_shot, min_shot, linear)
+                cmp[out, SIDE - 1] = compress_row(mid, inputs.scale_shot, inputs.min_shot, linear)
 
 
-# texture_combine: one thread per run of LANES pixels of a tile row, the run's pixels as vector lanes. Straight-line
-# lane code (selects instead of branches, exp_f32 instead of the libm call) lets the compiler turn each step into
-# LANES-wide vector instructions: the camera weights' ten exponentials per pixel were most of the combine's time
-# (measured: 4 lanes -25 %; 2 lanes gain nothing). With Taichi's matrices kept as LLVM vectors (taichi_setup.py),
-# 8 lanes take 0.66x the time of 4 (5 MPix combine 0.53 -> 0.35 s); 16 lanes crash (rows of 64 bytes at 32-byte
-# offsets: the vector loads assume alignment).
-LANES = 8
-RUNS = ti.types.ndarray(dtype=ti.types.vector(LANES, ti.f32), ndim=3)  # (n, 16, 16 / LANES) runs of pixels
-RUNS_2D = ti.types.ndarray(dtype=ti.types.vector(LANES, ti.f32), ndim=2)  # (16, 16 / LANES)
 # exp_f32: e^x = 2^n e^r, n = round(x / ln 2), r = x - n ln 2, e^r by a degree-7 polynomial on |r| <= ln 2 / 2
 # (Cephes' single-precision coefficients). The reduction is written in two parts (Cody-Waite: LN2_HIGH has few
 # bits, so n LN2_HIGH is exact), but Taichi's fast math may merge them into n times ln 2 rounded to float32:
@@ -209,47 +210,29 @@ def neighbour(finite: ti.template(), tile: ti.i32, inside: ti.i32) -> ti.i32:
 
 
 @ti.kernel
-def texture_combine(
-    pix: RUNS,
-    cmp: RUNS,
-    finite: U8_1D,
-    first: ti.i32,
-    tiles_x: ti.i32,
-    tiles_y: ti.i32,
-    ring_rows: ti.i32,
-    cams: ti.template(),
-    colours: ti.template(),
-    offsets: F32_2D,
-    colour_weights: F32_1D,
-    channel_of_colour: I32_1D,
-    diff_sigma: ti.f32,
-    weight_floor: ti.f32,
-    dust_remove: ti.i32,
-    output_gain: ti.f32,
-    window2: RUNS_2D,
-    rgba: RUNS,
-):
+def texture_combine(pix: RUNS, cmp: RUNS, finite: U8_1D, first: ti.i32, cams: ti.template(), colours: ti.template(),
+                    inputs: TextureInputs, rgba: RUNS):
     """One thread per run (tile, r, run) of LANES pixels of one band's contributing tiles (``pix``, ``cmp``: the
     band's tiles, frame tiles ``first`` on, as (n, 16, 16 / LANES) runs of LANES; ``finite``: the whole frame's),
     per pixel: weights (§7.3 a-d), colour = weighted mean of T, alpha = W2 x mean weight, times the alpha fade,
     into the tile's contribution (colours x output_gain) in the ring ``rgba`` (texture.texture_combine's: tile
-    row ty in slot row ty % ring_rows). window2: W2 = w(r)^2 w(c)^2 as (16, 16 / LANES) runs."""
-    xi = 1.0 / (2.0 * diff_sigma * diff_sigma)
+    row ty in slot row ty % ring_rows); the grid and settings from ``inputs`` (``TextureInputs``)."""
+    xi = 1.0 / (2.0 * inputs.diff_sigma * inputs.diff_sigma)
     # Per rig constants, once: -xi / |offset_b - offset_a|^2 of each pair (a < b) and the colour weights.
     pair_scale = ti.Vector.zero(ti.f32, cams * cams)
     for a in ti.static(range(cams)):
         for b in ti.static(range(a + 1, cams)):
-            ox = offsets[b, 0] - offsets[a, 0]
-            oy = offsets[b, 1] - offsets[a, 1]
+            ox = inputs.offsets[b, 0] - inputs.offsets[a, 0]
+            oy = inputs.offsets[b, 1] - inputs.offsets[a, 1]
             pair_scale[a * cams + b] = -xi / (ox * ox + oy * oy)
-    cw = ti.Vector([colour_weights[k] for k in ti.static(range(colours))])
+    cw = ti.Vector([inputs.colour_weights[k] for k in ti.static(range(colours))])
     for band_tile, r, run in ti.ndrange(pix.shape[0] // (cams * colours), SIDE, SIDE // LANES):
         tile = first + band_tile
         if finite[tile] != 0:
             base = band_tile * cams
-            ty = tile // tiles_x
-            tx = tile - ty * tiles_x
-            out = ((ty % ring_rows) * tiles_x + tx) * (colours + 1)
+            ty = tile // inputs.tiles_x
+            tx = tile - ty * inputs.tiles_x
+            out = ((ty % inputs.ring_rows) * inputs.tiles_x + tx) * (colours + 1)
             # compared values M / W2 of the run, [camera][colour]
             m = [[cmp[(base + cam) * colours + k, r, run] for k in ti.static(range(colours))]
                  for cam in ti.static(range(cams))]
@@ -261,7 +244,7 @@ def texture_combine(
                     for k in ti.static(range(colours)):
                         diff = m[a][k] - m[b][k]
                         d += cw[k] * diff * diff
-                    v = lanes_exp(d * pair_scale[a * cams + b]) + weight_floor
+                    v = lanes_exp(d * pair_scale[a * cams + b]) + inputs.weight_floor
                     w[a] += v
                     w[b] += v
             # b. the two best cameras (first index wins ties) and their weighted mean
@@ -290,10 +273,10 @@ def texture_combine(
                 for k in ti.static(range(colours)):
                     diff = m[cam][k] - mean[k]
                     d += cw[k] * diff * diff
-                w[cam] = lanes_exp(-xi * d) + weight_floor
+                w[cam] = lanes_exp(-xi * d) + inputs.weight_floor
                 total += w[cam]
             # d. dust removal
-            if dust_remove:
+            if inputs.dust_remove:
                 worst = ti.Vector.zero(ti.i32, LANES)
                 w_worst = w[0]
                 for cam in ti.static(range(1, cams)):
@@ -308,23 +291,22 @@ def texture_combine(
                     w[cam] = ti.select(worst == cam, w_worst * w_worst / mu, w[cam] * boost)
                     total += w[cam]
             # e. colour and alpha, faded at the edge of the contributing region
-            north = neighbour(finite, tile - tiles_x, ty > 0)
-            south = neighbour(finite, tile + tiles_x, ty + 1 < tiles_y)
+            north = neighbour(finite, tile - inputs.tiles_x, ty > 0)
+            south = neighbour(finite, tile + inputs.tiles_x, ty + 1 < inputs.tiles_y)
             west = neighbour(finite, tile - 1, tx > 0)
-            east = neighbour(finite, tile + 1, tx + 1 < tiles_x)
+            east = neighbour(finite, tile + 1, tx + 1 < inputs.tiles_x)
             fade = alpha_fade(north, east, south, west, r, run * LANES)
-            gain = output_gain * fade / total
+            gain = inputs.output_gain * fade / total
             for k in ti.static(range(colours)):
                 acc = ti.Vector.zero(ti.f32, LANES)
                 for cam in ti.static(range(cams)):
                     acc += w[cam] * pix[(base + cam) * colours + k, r, run]
-                rgba[out + channel_of_colour[k], r, run] = gain * acc
-            rgba[out + colours, r, run] = fade * window2[r, run] * total / ti.cast(cams, ti.f32)
+                rgba[out + inputs.channel_of_colour[k], r, run] = gain * acc
+            rgba[out + colours, r, run] = fade * inputs.window2[r, run] * total / ti.cast(cams, ti.f32)
 
 
 @ti.kernel
-def overlap_add(rgba: F32_3D, finite: U8_1D, tiles_x: ti.i32, tiles_y: ti.i32, ring_rows: ti.i32, y0: ti.i32,
-                rows: ti.i32, canvas: F32_3D):
+def overlap_add(rgba: F32_3D, finite: U8_1D, inputs: TextureInputs, y0: ti.i32, rows: ti.i32, canvas: F32_3D):
     """canvas[ch, y, x] for canvas rows y0 .. y0 + rows - 1 = sum of the contributing tiles' ``rgba`` (the ring of
     texture_combine) covering (y, x), tiles in row-major order (the Warp kernel's order: bit-reproducible with
     any thread count); every pixel of those rows is written. One thread per 8 pixels of a canvas row: the same up
@@ -336,10 +318,10 @@ def overlap_add(rgba: F32_3D, finite: U8_1D, tiles_x: ti.i32, tiles_y: ti.i32, r
         for dy, dx in ti.static(ti.ndrange(2, 2)):
             ty = y // 8 - 1 + dy
             tx = block - 1 + dx
-            if ty >= 0 and ty < tiles_y and tx >= 0 and tx < tiles_x:
-                tile = ty * tiles_x + tx
+            if ty >= 0 and ty < inputs.tiles_y and tx >= 0 and tx < inputs.tiles_x:
+                tile = ty * inputs.tiles_x + tx
                 if finite[tile] != 0:
-                    slot = (ty % ring_rows) * tiles_x + tx
+                    slot = (ty % inputs.ring_rows) * inputs.tiles_x + tx
                     for i in ti.static(range(8)):
                         acc[i] += rgba[slot * channels + ch, y - 8 * ty, i + 8 * (1 - dx)]
         for i in ti.static(range(8)):

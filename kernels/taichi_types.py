@@ -1,4 +1,9 @@
-"""Argument types of the Taichi kernels: external arrays (torch tensors, zero-copy) by element type and rank."""
+"""Argument types of the Taichi kernels: external arrays (torch tensors, zero-copy) by element type and rank.
+
+The kernels take a processor's fixed tables and buffers grouped in argument packs (``ti.types.argpack``, defined
+beside the kernels that own them, built once per runtime by ``taichi_setup.argpacks``). Taichi 1.7 names a pack's
+arrays by their member names only and reserves every member name in the kernel: member names differ across the
+packs of one kernel, and a kernel's locals do not reuse them."""
 
 import taichi as ti
 

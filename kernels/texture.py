@@ -22,31 +22,75 @@ from tpnet_gpu.runtime.warp_setup import kernel_module_options
 wp.set_module_options(kernel_module_options())  # hashed with every kernel source (warp_setup)
 
 
+@wp.struct
+class TextureInputs:
+    """What the texture kernels read besides one band's arrays: one processor's rig, tile grid, texture settings
+    and tables, built once with its texture buffers.
+
+    Fields:
+        cams, colours: cameras and colours (3 R, B, G; 1 mono).
+        tiles_x, tiles_y: the frame's tile grid.
+        ring_rows: tile rows of the ``rgba`` ring.
+        lpf: (colours, 8, 8) each colour's low-pass before the inverse MCLT.
+        inv_cos, inv_sin: (16, 8) per-axis inverse operators (window/2 x unfold x DTT-IV); inv_cos_t, inv_sin_t:
+            (8, 16) their transposes.
+        inv_window2: (16, 16) 1 / W2, W2 = w(r)^2 w(c)^2.
+        scale_shot, min_shot: the shot-noise compression (``compress``).
+        offsets: (cams,) the cameras' offsets r_i in baselines.
+        colour_weights: (colours,) the colours' weights in the cameras' agreement.
+        channel_of_colour: (colours,) int32 each colour's output channel (R, G, B order).
+        diff_sigma, weight_floor: the agreement's scale and the floor added to each weight (§7.3).
+        dust_remove: down-weight the worst camera (§7.3 d).
+        output_gain: the colours' gain.
+    """
+
+    cams: int
+    colours: int
+    tiles_x: int
+    tiles_y: int
+    ring_rows: int
+    lpf: wp.array3d(dtype=wp.float32)
+    inv_cos: wp.array2d(dtype=wp.float32)
+    inv_sin: wp.array2d(dtype=wp.float32)
+    inv_cos_t: wp.array2d(dtype=wp.float32)
+    inv_sin_t: wp.array2d(dtype=wp.float32)
+    inv_window2: wp.array2d(dtype=wp.float32)
+    scale_shot: float
+    min_shot: float
+    offsets: wp.array(dtype=wp.vec2f)
+    colour_weights: wp.array(dtype=wp.float32)
+    channel_of_colour: wp.array(dtype=wp.int32)
+    diff_sigma: float
+    weight_floor: float
+    dust_remove: bool
+    output_gain: float
+
+
 @wp.kernel
 def texture_imclt(
     clt: wp.array3d(dtype=wp.float32),
     finite: wp.array(dtype=wp.bool),
-    cams: int,
-    colours: int,
-    lpf: wp.array3d(dtype=wp.float32),
-    inv_cos: wp.array2d(dtype=wp.float32),
-    inv_sin: wp.array2d(dtype=wp.float32),
-    inv_cos_t: wp.array2d(dtype=wp.float32),
-    inv_sin_t: wp.array2d(dtype=wp.float32),
+    inputs: TextureInputs,
     pix: wp.array3d(dtype=wp.float32),
 ):
-    """One block per tile. lpf: (colours, 8, 8); inv_*: (16, 8) per-axis inverse operators (window/2 x unfold x
-    DTT-IV) and inv_*_t their (8, 16) transposes; pix out: T = sum_q G_{q>>1} (L X_q) G_{q&1}^T."""
+    """One block per tile, the inverse operators and low-passes from ``inputs`` (``TextureInputs``); pix out:
+    T = sum_q G_{q>>1} (L X_q) G_{q&1}^T."""
     tile = wp.tid()
     if not finite[tile]:
         return
+    cams = inputs.cams
+    colours = inputs.colours
+    inv_cos = inputs.inv_cos  # a struct's array is loaded as a tile from a local (Warp 1.19: not from the field)
+    inv_sin = inputs.inv_sin
+    inv_cos_t = inputs.inv_cos_t
+    inv_sin_t = inputs.inv_sin_t
     g_c = wp.tile_load(inv_cos, shape=(16, 8))
     g_s = wp.tile_load(inv_sin, shape=(16, 8))
     gt_c = wp.tile_load(inv_cos_t, shape=(8, 16))
     gt_s = wp.tile_load(inv_sin_t, shape=(8, 16))
     for cam in range(cams):
         for colour in range(colours):
-            low = wp.tile_load(lpf[colour], shape=(8, 8))
+            low = wp.tile_load(inputs.lpf[colour], shape=(8, 8))
             base = ((tile * cams + cam) * colours + colour) * 4
             x0 = wp.tile_map(wp.mul, wp.tile_load(clt[base + 0], shape=(8, 8)), low)
             x1 = wp.tile_map(wp.mul, wp.tile_load(clt[base + 1], shape=(8, 8)), low)
@@ -80,18 +124,16 @@ def compress(v: float, scale_shot: float, min_shot: float, linear: float) -> flo
 def texture_demosaic(
     pix: wp.array3d(dtype=wp.float32),
     finite: wp.array(dtype=wp.bool),
-    cams: int,
-    colours: int,
-    scale_shot: float,
-    min_shot: float,
-    inv_window2: wp.array2d(dtype=wp.float32),
+    inputs: TextureInputs,
     cmp: wp.array3d(dtype=wp.float32),
 ):
     """Per pixel of every (tile, camera, colour): M / W2 = compress(filter3x3(T / W2)) on the 14x14 interior
     (R, B: [1 2 1; 2 4 2; 1 2 1] / 16; G: [0 1 0; 1 4 1; 0 1 0] / 8, as centre x T + 1/8 x the 4 edge
-    neighbours + corner x the 4 diagonal ones), border unfiltered; mono: T / W2. inv_window2: (16, 16) 1 / W2."""
+    neighbours + corner x the 4 diagonal ones), border unfiltered; mono: T / W2."""
     i, r, c = wp.tid()
-    if not finite[i // (cams * colours)]:
+    colours = inputs.colours
+    inv_window2 = inputs.inv_window2
+    if not finite[i // (inputs.cams * colours)]:
         return
     v = pix[i, r, c] * inv_window2[r, c]
     if colours == 1:
@@ -109,7 +151,8 @@ def texture_demosaic(
                     + pix[i, r + 1, c - 1] * inv_window2[r + 1, c - 1]
                     + pix[i, r + 1, c + 1] * inv_window2[r + 1, c + 1])
         v = centre * v + 0.125 * edge + corner * diagonal
-    cmp[i, r, c] = compress(v, scale_shot, min_shot, scale_shot / wp.sqrt(min_shot))
+    scale_shot = inputs.scale_shot
+    cmp[i, r, c] = compress(v, scale_shot, inputs.min_shot, scale_shot / wp.sqrt(inputs.min_shot))
 
 
 @wp.func
@@ -146,31 +189,26 @@ def texture_combine(
     cmp: wp.array3d(dtype=wp.float32),
     finite: wp.array(dtype=wp.bool),
     first: int,
-    tiles_x: int,
-    tiles_y: int,
-    ring_rows: int,
-    cams: int,
-    colours: int,
-    offsets: wp.array(dtype=wp.vec2f),
-    colour_weights: wp.array(dtype=wp.float32),
-    channel_of_colour: wp.array(dtype=wp.int32),
-    diff_sigma: float,
-    weight_floor: float,
-    dust_remove: bool,
-    output_gain: float,
+    inputs: TextureInputs,
     weights: wp.array3d(dtype=wp.float32),
     rgba: wp.array3d(dtype=wp.float32),
 ):
     """Per pixel (tile, r, c) of one band's contributing tiles (``pix``, ``cmp``, ``weights``: the band's tiles,
     frame tiles ``first`` on; ``finite``: the whole frame's): weights (§7.3 a-d), colour = weighted mean of T,
     alpha = W2 x mean weight, times the alpha fade, into the tile's contribution (colours x output_gain) in the
-    ring ``rgba`` (ring_rows * tiles_x * (colours + 1), 16, 16): tile row ty in slot row ty % ring_rows."""
+    ring ``rgba`` (ring_rows * tiles_x * (colours + 1), 16, 16): tile row ty in slot row ty % ring_rows; the rig,
+    grid and settings from ``inputs`` (``TextureInputs``)."""
     band_tile, r, c = wp.tid()
+    cams = inputs.cams
+    colours = inputs.colours
+    tiles_x = inputs.tiles_x
+    colour_weights = inputs.colour_weights
+    weight_floor = inputs.weight_floor
     tile = first + band_tile
     if not finite[tile]:
         return
     w2 = window_sq(r, c)
-    xi = 1.0 / (2.0 * diff_sigma * diff_sigma)
+    xi = 1.0 / (2.0 * inputs.diff_sigma * inputs.diff_sigma)
     base = band_tile * cams
     # a. pairwise agreement
     for cam in range(cams):
@@ -181,7 +219,7 @@ def texture_combine(
             for k in range(colours):
                 diff = cmp[(base + a) * colours + k, r, c] - cmp[(base + b) * colours + k, r, c]
                 d += colour_weights[k] * diff * diff
-            v = wp.exp(d * (-xi / wp.length_sq(offsets[b] - offsets[a]))) + weight_floor
+            v = wp.exp(d * (-xi / wp.length_sq(inputs.offsets[b] - inputs.offsets[a]))) + weight_floor
             weights[base + a, r, c] = weights[base + a, r, c] + v
             weights[base + b, r, c] = weights[base + b, r, c] + v
     # b. the two best cameras (first index wins ties)
@@ -210,7 +248,7 @@ def texture_combine(
         weights[base + cam, r, c] = wp.exp(-xi * d) + weight_floor
         total += weights[base + cam, r, c]
     # d. dust removal
-    if dust_remove:
+    if inputs.dust_remove:
         worst = int(0)
         for cam in range(1, cams):
             if weights[base + cam, r, c] < weights[base + worst, r, c]:
@@ -232,17 +270,17 @@ def texture_combine(
     tx = tile - ty * tiles_x
     # Positions outside the frame count as contributing: only the region's edges inside the frame fade.
     north = ty == 0 or finite[tile - tiles_x]
-    south = ty + 1 == tiles_y or finite[tile + tiles_x]
+    south = ty + 1 == inputs.tiles_y or finite[tile + tiles_x]
     west = tx == 0 or finite[tile - 1]
     east = tx + 1 == tiles_x or finite[tile + 1]
     fade = alpha_fade(north, east, south, west, r, c)
-    out = ((ty % ring_rows) * tiles_x + tx) * (colours + 1)
-    gain = output_gain * fade / total
+    out = ((ty % inputs.ring_rows) * tiles_x + tx) * (colours + 1)
+    gain = inputs.output_gain * fade / total
     for k in range(colours):
         acc = float(0.0)
         for cam in range(cams):
             acc += weights[base + cam, r, c] * pix[(base + cam) * colours + k, r, c]
-        rgba[out + channel_of_colour[k], r, c] = gain * acc
+        rgba[out + inputs.channel_of_colour[k], r, c] = gain * acc
     rgba[out + colours, r, c] = fade * w2 * total / float(cams)
 
 
@@ -250,9 +288,7 @@ def texture_combine(
 def overlap_add(
     rgba: wp.array3d(dtype=wp.float32),
     finite: wp.array(dtype=wp.bool),
-    tiles_x: int,
-    tiles_y: int,
-    ring_rows: int,
+    inputs: TextureInputs,
     y0: int,
     canvas: wp.array3d(dtype=wp.float32),
 ):
@@ -260,6 +296,8 @@ def overlap_add(
     contributing tiles' ``rgba`` (the ring of texture_combine) that cover (y, x), tiles in row-major order
     (canvas pixel y is row y - 8 ty of tiles ty = y // 8 - 1 and y // 8); every pixel of those rows is written."""
     ch, row, x = wp.tid()
+    tiles_x = inputs.tiles_x
+    tiles_y = inputs.tiles_y
     y = y0 + row
     channels = canvas.shape[0]
     acc = float(0.0)
@@ -268,6 +306,6 @@ def overlap_add(
             if ty >= 0 and ty < tiles_y and tx >= 0 and tx < tiles_x:
                 tile = ty * tiles_x + tx
                 if finite[tile]:
-                    slot = (ty % ring_rows) * tiles_x + tx
+                    slot = (ty % inputs.ring_rows) * tiles_x + tx
                     acc += rgba[slot * channels + ch, y - 8 * ty, x - 8 * tx]
     canvas[ch, y, x] = acc

@@ -50,3 +50,28 @@ def test_bad_thread_counts(monkeypatch):
 def test_bad_arch():
     with pytest.raises(ValueError, match=r"arch: expected one of \('cpu', 'cuda'\), got 'vulkan'"):
         taichi_setup.init_taichi("vulkan")
+
+
+def test_argument_packs_are_made_again_after_a_reinitialisation(tmp_path):
+    """A processor's argument packs live in one Taichi runtime (taichi_setup.argpacks): after a re-initialisation
+    (another arch in between, simulated on the CPU) its next call makes them again, and none is freed after
+    Taichi's modules at exit. Oracle: the same processor's correlations before the re-initialisation (bit-equal),
+    and an exit without an ignored exception on stderr."""
+    script = tmp_path / "reinit_run.py"
+    script.write_text(textwrap.dedent("""
+        import numpy as np
+        import torch
+        from tpnet_gpu.runtime import taichi_setup
+        from tpnet_gpu.processor import TileProcessor
+        frames = np.random.default_rng(1).uniform(0, 4000, (4, 32, 48)).astype(np.float32)
+        tp = TileProcessor(32, 48, textures=True, device="cpu", backend="taichi")
+        first = tp.process(frames, 1.0).corr.clone()
+        taichi_setup._state["arch"] = None  # as after a run on another arch
+        taichi_setup.init_taichi("cpu")
+        print("equal", torch.equal(first, tp.process(frames, 1.0).corr), bool(first.any()))
+    """))
+    env = {**os.environ, "TPNET_TAICHI_THREADS": "1"}
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600, env=env)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "equal True True" in done.stdout
+    assert "Exception ignored" not in done.stderr, done.stderr[-2000:]

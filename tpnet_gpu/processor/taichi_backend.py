@@ -37,6 +37,7 @@ class TaichiBackend:
         self.arch = "cuda" if self.cuda else "cpu"
         taichi_setup.init_taichi(self.arch)
         self.t = {}  # Warp array id (or ("runs", id)) -> its torch view, made once
+        self.packs: dict | None = None  # the argument packs, during a run (``_argpacks``)
         self.frames_t = buffers.frames_t
         # Fused pass: a few slots per CPU thread (balance), one GPU thread per slot on CUDA (at most one per tile).
         slots = min(geo.tiles, CUDA_FUSED_SLOTS) if self.cuda else CPU_FUSED_SLOTS_PER_THREAD * taichi_setup.threads()
@@ -76,25 +77,59 @@ class TaichiBackend:
             view = self.t[key] = tensor.view(*tensor.shape[:-1], tensor.shape[-1] // lanes, lanes)
         return view
 
+    def _argpacks(self) -> dict:
+        """The kernels' argument packs, made once per Taichi runtime (``taichi_setup.argpacks``): they refer to the
+        buffers' torch views, whose contents each call rewrites."""
+        b, geo, cfg, v = self.b, self.geo, self.config, self._v
+        return {
+            "convert": taichi_convert.ConvertInputs(
+                padded=v(b.padded), image_height=geo.height, image_width=geo.width, colours=geo.colours,
+                masks=v(b.masks), kernels=v(b.kernels), kernel_rows=b.kernel_grid[0], kernel_cols=b.kernel_grid[1],
+                use_kernels=int(b.use_kernels)),
+            "correlate": taichi_correlate.CorrelateInputs(
+                pairs=v(b.pairs), colours=geo.colours, used=v(b.used_colours), weights=v(b.used_weights),
+                fat_zero=cfg.fat_zero, lpf_rb=v(b.lpf_rb), lpf_corr=v(b.lpf_corr), net_offset=cfg.net_offset),
+            "fused": taichi_fused.FusedWork(
+                tasks=v(b.tasks), count=v(b.count), positions=v(b.used_positions), scratch=v(b.scratch),
+                written=v(b.written), layers_written=v(b.layers_written)),
+            **({} if b.result.texture is None else {"texture": self._texture_inputs()}),  # textures=True
+        }
+
+    def _texture_inputs(self):
+        b, geo, tc, v = self.b, self.geo, self.texture_config, self._v
+        return taichi_texture.TextureInputs(
+            tiles_x=geo.tiles_x, tiles_y=geo.tiles_y, ring_rows=b.ring_rows, lpf=v(b.tex_lpf), inv_cos=v(b.inv_cos),
+            inv_sin=v(b.inv_sin), inv_window2=v(b.inv_window2), scale_shot=tc.scale_shot, min_shot=tc.min_shot,
+            offsets=v(b.offsets), colour_weights=v(b.tex_weights_c), channel_of_colour=v(b.channel_of_colour),
+            diff_sigma=tc.diff_sigma, weight_floor=tables.TEXTURE_WEIGHT_FLOOR, dust_remove=int(tc.dust_remove),
+            output_gain=tc.output_gain, window2=self._runs(b.window2))
+
     def run(self, steps: tuple[str, ...], *, frames: torch.Tensor | None, masked: bool) -> None:
         with _TAICHI_LOCK:
             taichi_setup.use_arch(self.arch)
-            if self.cuda:
-                torch.cuda.current_stream(self.b.torch_device).synchronize()
-            for step in steps:
-                if step == "pad":
-                    taichi_frames.pad_frames(self.frames_t if frames is None else frames, self._v(self.b.padded))
-                elif step == "fused":  # with the layers when they are asked for (made inside the fused kernel)
-                    self._fused(masked, "layers" in steps)
-                elif step in ("convert", "convert_texture"):
-                    getattr(self, "_" + step)(masked)
-                elif step == "layers":
-                    if "fused" not in steps:
-                        self._layers()
-                else:
-                    getattr(self, "_" + step)()
-            if self.cuda:
-                taichi_setup.ti.sync()
+            self.packs = taichi_setup.argpacks(self, self._argpacks)
+            try:
+                self._run(steps, frames, masked)
+            finally:
+                self.packs = None  # kept by taichi_setup for the runtime that made them, not beyond it
+
+    def _run(self, steps: tuple[str, ...], frames: torch.Tensor | None, masked: bool) -> None:
+        if self.cuda:
+            torch.cuda.current_stream(self.b.torch_device).synchronize()
+        for step in steps:
+            if step == "pad":
+                taichi_frames.pad_frames(self.frames_t if frames is None else frames, self._v(self.b.padded))
+            elif step == "fused":  # with the layers when they are asked for (made inside the fused kernel)
+                self._fused(masked, "layers" in steps)
+            elif step in ("convert", "convert_texture"):
+                getattr(self, "_" + step)(masked)
+            elif step == "layers":
+                if "fused" not in steps:
+                    self._layers()
+            else:
+                getattr(self, "_" + step)()
+        if self.cuda:
+            taichi_setup.ti.sync()
 
     def _centres(self) -> None:
         b = self.b
@@ -106,32 +141,22 @@ class TaichiBackend:
 
     def _convert_tiles(self, centres, active, clt, finite, valid) -> None:
         """convert_tiles over the tiles of ``centres`` (the frame's, or one band's views)."""
-        b, geo, v = self.b, self.geo, self._v
-        taichi_convert.convert_tiles(
-            v(b.padded), v(centres), v(active), v(b.masks), v(b.kernels),
-            b.kernel_grid[0], b.kernel_grid[1], int(b.use_kernels), geo.height, geo.width, geo.colours,
-            v(clt), v(finite), v(valid),
-        )
+        v = self._v
+        taichi_convert.convert_tiles(self.packs["convert"], v(centres), v(active), v(clt), v(finite), v(valid))
 
     def _fused(self, masked: bool, layers: bool) -> None:
-        b, geo, cfg, v = self.b, self.geo, self.config, self._v
+        b, v, packs = self.b, self._v, self.packs
         layers = layers and b.layers is not None
         taichi_fused.fused_tiles(
-            v(b.padded), v(b.centres), v(b.active if masked else b.all_active), v(b.masks), v(b.kernels),
-            b.kernel_grid[0], b.kernel_grid[1], int(b.use_kernels), geo.height, geo.width, geo.colours,
-            v(b.used_colours), v(b.used_positions), v(b.used_weights), v(b.pairs), cfg.fat_zero, v(b.lpf_rb),
-            v(b.lpf_corr), cfg.net_offset, int(layers), v(b.tasks),
-            v(b.count), v(b.scratch), self._flat(b.corr),
-            self._flat(b.layers) if layers else self.no_layers, v(b.finite), v(b.valid), v(b.written),
-            v(b.layers_written),
+            packs["convert"], packs["correlate"], packs["fused"], v(b.centres), v(b.active if masked else b.all_active),
+            int(layers), self._flat(b.corr), self._flat(b.layers) if layers else self.no_layers, v(b.finite),
+            v(b.valid),
         )
 
     def _correlate(self) -> None:
-        b, geo, cfg, v = self.b, self.geo, self.config, self._v
-        taichi_correlate.correlate_tiles(
-            v(b.clt), v(b.finite), v(b.pairs), geo.cams, geo.colours, v(b.used_colours), v(b.used_weights),
-            cfg.fat_zero, v(b.lpf_rb), v(b.lpf_corr), self._flat(b.corr),
-        )
+        b, v = self.b, self._v
+        taichi_correlate.correlate_tiles(v(b.clt), v(b.finite), self.geo.cams, self.packs["correlate"],
+                                         self._flat(b.corr))
         v(b.written).fill_(1)  # every tile's correlations were written, zero where not finite
 
     def _layers(self) -> None:
@@ -146,26 +171,20 @@ class TaichiBackend:
 
     def _texture(self, convert: bool = False, masked: bool = False) -> None:
         """The texture band by band in ``backend.run_bands``' order; with ``convert``, each band converted first."""
-        b, geo, tc, v = self.b, self.geo, self.texture_config, self._v
+        b, geo, v, tex = self.b, self.geo, self._v, self.packs["texture"]
 
         def convert_band(band) -> None:
             self._convert_tiles(band.centres, band.active if masked else band.all_active, band.clt, band.finite,
                                 band.valid)
 
         def read_tiles(band) -> None:
-            taichi_texture.texture_imclt(v(band.clt), v(band.finite), geo.cams, geo.colours, v(b.tex_lpf),
-                                         v(b.inv_cos), v(b.inv_sin), v(b.inv_window2), tc.scale_shot,
-                                         tc.min_shot, v(band.pix), v(band.cmp))
+            taichi_texture.texture_imclt(v(band.clt), v(band.finite), geo.cams, geo.colours, tex, v(band.pix),
+                                         v(band.cmp))
 
         def write_pixels(band) -> None:
             runs = self._runs
-            taichi_texture.texture_combine(
-                runs(band.pix), runs(band.cmp), v(b.finite), band.first * geo.tiles_x, geo.tiles_x, geo.tiles_y,
-                b.ring_rows, geo.cams, geo.colours, v(b.offsets), v(b.tex_weights_c), v(b.channel_of_colour),
-                tc.diff_sigma, tables.TEXTURE_WEIGHT_FLOOR, int(tc.dust_remove), tc.output_gain, runs(b.window2),
-                runs(b.tex_rgba),
-            )
-            taichi_texture.overlap_add(v(b.tex_rgba), v(b.finite), geo.tiles_x, geo.tiles_y, b.ring_rows, band.y0,
-                                       band.rows, v(b.canvas))
+            taichi_texture.texture_combine(runs(band.pix), runs(band.cmp), v(b.finite), band.first * geo.tiles_x,
+                                           geo.cams, geo.colours, tex, runs(b.tex_rgba))
+            taichi_texture.overlap_add(v(b.tex_rgba), v(b.finite), tex, band.y0, band.rows, v(b.canvas))
 
         run_bands(b.texture_bands, read_tiles, write_pixels, convert_band if convert else None)

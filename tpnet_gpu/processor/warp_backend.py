@@ -31,6 +31,16 @@ _CPU_LAUNCH_LOCK = threading.Lock()
 KERNEL_MODULES = (frames, convert, correlate, fused, texture)
 
 
+def make_struct(struct, **fields):
+    """An instance of the Warp struct type ``struct`` with every one of its fields set from ``fields``."""
+    if set(fields) != set(struct.vars):
+        raise TypeError(f"{struct.key}: expected the fields {sorted(struct.vars)}, got {sorted(fields)}")
+    instance = struct()
+    for name, value in fields.items():
+        setattr(instance, name, value)
+    return instance
+
+
 class WarpBackend:
     """Warp launches of one processor's steps (see the module docstring)."""
 
@@ -48,6 +58,25 @@ class WarpBackend:
         self._lock = _CPU_LAUNCH_LOCK if self.device.is_cpu else threading.Lock()
         self.slots = min(geo.tiles, CUDA_FUSED_SLOTS) if self.device.is_cuda else 1
         buffers.allocate_fused(self.slots)
+        # The kernels' argument structs, made once: they refer to the buffers, whose contents each call rewrites.
+        b, cfg, tc = buffers, config, texture_config
+        self.convert_in = make_struct(
+            convert.ConvertInputs, padded=b.padded, image_height=geo.height, image_width=geo.width,
+            colours=geo.colours, masks=b.masks, k_rows=b.k_rows, n_rows=b.n_rows, n_cols=b.n_cols, k_cols=b.k_cols,
+            kernels=b.kernels, kernel_rows=b.kernel_grid[0], kernel_cols=b.kernel_grid[1], use_kernels=b.use_kernels)
+        self.correlate_in = make_struct(
+            correlate.CorrelateInputs, pairs=b.pairs, colours=geo.colours, used=b.used_colours, weights=b.used_weights,
+            fat_zero=cfg.fat_zero, lpf_rb=b.lpf_rb, lpf_corr=b.lpf_corr, lags_cos=b.lags_cos, lags_sin=b.lags_sin,
+            freqs_cos=b.freqs_cos, freqs_sin=b.freqs_sin)
+        self.fused_work = make_struct(fused.FusedWork, tasks=b.tasks, count=b.count, slots=self.slots,
+                                      positions=b.used_positions, scratch=b.scratch, written=b.written)
+        self.texture_in = None if b.result.texture is None else make_struct(  # texture buffers: textures=True
+            texture.TextureInputs, cams=geo.cams, colours=geo.colours, tiles_x=geo.tiles_x, tiles_y=geo.tiles_y,
+            ring_rows=b.ring_rows, lpf=b.tex_lpf, inv_cos=b.inv_cos, inv_sin=b.inv_sin, inv_cos_t=b.inv_cos_t,
+            inv_sin_t=b.inv_sin_t, inv_window2=b.inv_window2, scale_shot=tc.scale_shot, min_shot=tc.min_shot,
+            offsets=b.offsets, colour_weights=b.tex_weights_c, channel_of_colour=b.channel_of_colour,
+            diff_sigma=tc.diff_sigma, weight_floor=tables.TEXTURE_WEIGHT_FLOOR, dust_remove=tc.dust_remove,
+            output_gain=tc.output_gain)
 
     # --- streams and graphs --------------------------------------------------------------------------------
     def _torch_stream(self) -> wp.Stream | None:
@@ -119,22 +148,12 @@ class WarpBackend:
 
     def _convert_tiles(self, centres, active, clt, finite, valid) -> None:
         """convert_tiles over the tiles of ``centres`` (the frame's, or one band's views)."""
-        b, geo = self.b, self.geo
-        self._tile_launch_n(
-            convert.convert_tiles, centres.shape[0],
-            [b.padded, centres, active, b.masks, b.k_rows, b.n_rows, b.n_cols, b.k_cols, b.kernels,
-             b.kernel_grid[0], b.kernel_grid[1], b.use_kernels, geo.height, geo.width, b.all_colours],
-            [clt, finite, valid],
-        )
+        self._tile_launch_n(convert.convert_tiles, centres.shape[0],
+                            [self.convert_in, centres, active, self.b.all_colours], [clt, finite, valid])
 
     def _correlate(self) -> None:
-        b, geo, cfg = self.b, self.geo, self.config
-        self._tile_launch(
-            correlate.correlate_tiles,
-            [b.clt, b.finite, b.pairs, geo.cams, geo.colours, b.used_colours, b.used_weights, cfg.fat_zero,
-             b.lpf_rb, b.lpf_corr, b.lags_cos, b.lags_sin, b.freqs_cos, b.freqs_sin],
-            [b.corr],
-        )
+        b = self.b
+        self._tile_launch(correlate.correlate_tiles, [b.clt, b.finite, self.geo.cams, self.correlate_in], [b.corr])
         b.written.fill_(True)  # every tile's correlations were written (zero where not finite)
 
     def _layers(self) -> None:
@@ -145,16 +164,14 @@ class WarpBackend:
                                 [b.layers])
 
     def _fused(self, masked: bool) -> None:
-        b, geo, cfg = self.b, self.geo, self.config
-        self._thread_launch(fused.reset_count, 1, [], [b.count])
-        self._thread_launch(fused.compact_tasks, geo.tiles, [b.active if masked else b.all_active, len(geo.pairs)],
-                            [b.tasks, b.count, b.finite, b.valid, b.corr, b.written])
+        b, geo = self.b, self.geo
+        self._thread_launch(fused.reset_count, 1, [self.fused_work], [])
+        self._thread_launch(fused.compact_tasks, geo.tiles,
+                            [b.active if masked else b.all_active, len(geo.pairs), self.fused_work],
+                            [b.finite, b.valid, b.corr])
         wp.launch_tiled(
             fused.fused_tiles, dim=[self.slots],
-            inputs=[b.tasks, b.count, self.slots, b.padded, b.centres, b.masks, b.k_rows, b.n_rows, b.n_cols,
-                    b.k_cols, b.kernels, b.kernel_grid[0], b.kernel_grid[1], b.use_kernels, geo.height, geo.width,
-                    geo.colours, b.used_colours, b.used_positions, b.used_weights, b.pairs, cfg.fat_zero, b.lpf_rb,
-                    b.lpf_corr, b.lags_cos, b.lags_sin, b.freqs_cos, b.freqs_sin, b.scratch],
+            inputs=[self.fused_work, self.convert_in, b.centres, self.correlate_in],
             outputs=[b.corr, b.finite, b.valid], block_dim=self.block_dim, device=self.device,
         )
 
@@ -165,33 +182,21 @@ class WarpBackend:
         """The texture one band of tile rows at a time through the scratch (Buffers), in ``backend.run_bands``'
         order; with ``convert``, each band's CLT tiles are converted into the band buffer first (a processor
         without the whole-frame one)."""
-        b, geo, tc = self.b, self.geo, self.texture_config
+        b, geo, tex = self.b, self.geo, self.texture_in
 
         def convert_band(band) -> None:
             self._convert_tiles(band.centres, band.active if masked else band.all_active, band.clt, band.finite,
                                 band.valid)
 
         def read_tiles(band) -> None:
-            self._tile_launch_n(
-                texture.texture_imclt, band.finite.shape[0],
-                [band.clt, band.finite, geo.cams, geo.colours, b.tex_lpf, b.inv_cos, b.inv_sin, b.inv_cos_t,
-                 b.inv_sin_t],
-                [band.pix],
-            )
-            self._thread_launch(texture.texture_demosaic, band.pix.shape,
-                                [band.pix, band.finite, geo.cams, geo.colours, tc.scale_shot, tc.min_shot,
-                                 b.inv_window2],
-                                [band.cmp])
+            self._tile_launch_n(texture.texture_imclt, band.finite.shape[0], [band.clt, band.finite, tex], [band.pix])
+            self._thread_launch(texture.texture_demosaic, band.pix.shape, [band.pix, band.finite, tex], [band.cmp])
 
         def write_pixels(band) -> None:
-            self._thread_launch(
-                texture.texture_combine, (band.finite.shape[0], *b.tex_pix.shape[1:]),
-                [band.pix, band.cmp, b.finite, band.first * geo.tiles_x, geo.tiles_x, geo.tiles_y, b.ring_rows,
-                 geo.cams, geo.colours, b.offsets, b.tex_weights_c, b.channel_of_colour, tc.diff_sigma,
-                 tables.TEXTURE_WEIGHT_FLOOR, tc.dust_remove, tc.output_gain],
-                [band.weights, b.tex_rgba],
-            )
+            self._thread_launch(texture.texture_combine, (band.finite.shape[0], *b.tex_pix.shape[1:]),
+                                [band.pix, band.cmp, b.finite, band.first * geo.tiles_x, tex],
+                                [band.weights, b.tex_rgba])
             self._thread_launch(texture.overlap_add, (b.canvas.shape[0], band.rows, b.canvas.shape[2]),
-                                [b.tex_rgba, b.finite, geo.tiles_x, geo.tiles_y, b.ring_rows, band.y0], [b.canvas])
+                                [b.tex_rgba, b.finite, tex, band.y0], [b.canvas])
 
         run_bands(b.texture_bands, read_tiles, write_pixels, convert_band if convert else None)

@@ -2,8 +2,10 @@
 
 Taichi has one runtime per process, set up by ``ti.init``: its arch (cpu or cuda) and its CPU thread count are
 fixed until the next ``ti.init``. The Taichi kernels of the tile processor only take external torch tensors
-(``ti.types.ndarray()``), so re-initialising for another arch loses nothing but compiled kernels, which the
-offline cache reloads in milliseconds; ``use_arch`` does that when processors of both archs share a process.
+(``ti.types.ndarray()``), alone or grouped in argument packs (``ti.types.argpack``), so re-initialising for
+another arch loses nothing but compiled kernels, which the offline cache reloads in milliseconds, and the packs,
+which live in one runtime: ``argpacks`` makes them again (``use_arch`` re-initialises when processors of both
+archs share a process).
 
 * Offline cache: ``$TPNET_CACHE_DIR/taichi``, else ``~/.cache/tpnet-gpu/taichi`` (CI keeps it between runs).
 * CPU threads: the ``threads`` argument of the first ``init_taichi``, else ``$TPNET_TAICHI_THREADS``, else every
@@ -22,6 +24,7 @@ own positions (for the best bounds-check messages).
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import io
 import linecache
@@ -29,6 +32,8 @@ import os
 import sys
 import threading
 import warnings
+import weakref
+from collections.abc import Callable
 from pathlib import Path
 
 THREADS_ENV = "TPNET_TAICHI_THREADS"
@@ -87,6 +92,10 @@ quick_front_end()
 
 _lock = threading.RLock()
 _state: dict = {"arch": None, "threads": None}
+# owner -> its argument packs in the current runtime (``argpacks``); emptied before every ``ti.init`` and at exit
+_packs: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+# A pack freed after Taichi's modules are torn down at exit prints an ignored TypeError: free them first.
+atexit.register(_packs.clear)
 
 
 def cache_dir() -> Path:
@@ -129,6 +138,7 @@ def init_taichi(arch: str = "cpu", threads: int | None = None) -> None:
         count = _state["threads"] or threads or _threads_from_env()
         cache = cache_dir()
         cache.mkdir(parents=True, exist_ok=True)
+        _packs.clear()  # freed in the runtime that made them, before ti.init replaces it
         with contextlib.redirect_stdout(io.StringIO()):  # ti.init prints "[Taichi] Starting on arch=..."
             ti.init(
                 arch=ti.cuda if arch == "cuda" else ti.cpu,
@@ -156,6 +166,17 @@ def use_arch(arch: str) -> None:
     """Make ``arch`` Taichi's current arch before a launch (re-initialises only when it changes)."""
     if _state["arch"] != arch:
         init_taichi(arch)
+
+
+def argpacks(owner, build: Callable[[], dict]) -> dict:
+    """``owner``'s argument packs (name -> ``ti.types.argpack`` instance) in the current runtime: ``build()`` at the
+    first call and again after a re-initialisation; freed with ``owner``. Call it under the owner's launch lock,
+    after ``use_arch``, and keep no pack beyond the launch (a kept one would outlive its runtime)."""
+    with _lock:
+        packs = _packs.get(owner)
+        if packs is None:
+            packs = _packs[owner] = build()
+        return packs
 
 
 def threads() -> int | None:
