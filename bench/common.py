@@ -156,8 +156,8 @@ def frame_info(args: argparse.Namespace, cfa: str | None, cams: int, tiles: int,
 
 # --- entry points -----------------------------------------------------------------------------------------------
 def prog(module: str) -> str:
-    """The command of a bench module (``tpnet_gpu.bench.bench_tp`` -> ``tpnet bench tp``)."""
-    if module == "__main__":  # python -m tpnet_gpu.bench.bench_NAME
+    """The command of a bench module (``tpnet_gpu.bench.throughput.bench_tp`` -> ``tpnet bench tp``)."""
+    if module == "__main__":  # python -m tpnet_gpu.bench.GROUP.bench_NAME
         spec = getattr(sys.modules["__main__"], "__spec__", None)
         module = spec.name if spec is not None else module
     return f"tpnet bench {module.rpartition('.')[2].removeprefix('bench_')}"

@@ -15,7 +15,7 @@ import torch
 from tpnet_gpu.disparity.grid import surface_mean
 
 # px: the neighbours within this of a tile count as its surface. Measured with the v4 weights, one pass, on 32
-# rendered 640x480 scenes of seeds 20000+ (neither training nor held out; bench/bench_network_context.py),
+# rendered 640x480 scenes of seeds 20000+ (neither training nor held out; bench/accuracy/bench_network_context.py),
 # own-inlier RMSE as a ratio to the engine's, tuning scenes 0-15 / check scenes 16-31:
 # flat 0.630 -> 0.458x / 0.693 -> 0.554x, edge 1.048 -> 0.847x / 0.981 -> 0.854x, all 0.902 -> 0.789x /
 # 0.887 -> 0.799x; strict gross tiles (all classes) 2637 -> 2638 / 2389 -> 2380. A 0.25 px band kept less of the

@@ -112,7 +112,7 @@ def test_bad_network_passes():
 # targets - their padded targets, masked targets and differences are 3 small tiles-sized tensors); before issue 14
 # 50 of 2.6 MB (the network rebuilt its stage-2 kernels and made new tensors for NaN fill and activations). The
 # network's context step (net/context.py) adds 30 small ones: tiles-sized grids and 3x3 windows, 0.3 frame sizes
-# (64 in all, 14.9 frame sizes). The texture stages allocate nothing (tests/test_processor.py). The bounds leave
+# (64 in all, 14.9 frame sizes). The texture stages allocate nothing (tests/processor/test_tile_processor.py). The bounds leave
 # a small margin for other torch versions.
 MAX_ALLOCATIONS, MAX_FRAME_SIZES = 67, 16.0
 

@@ -35,7 +35,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from tpnet_gpu import operators, tables
 from tpnet_gpu.layout import HALF_TILE, PAD
 
-from .common import N, SIDE, WIN, basis_expansion, conj_product_signs, correlation_weights
+from tpnet_gpu.bench.twins.common import N, SIDE, WIN, basis_expansion, conj_product_signs, correlation_weights
 
 __all__ = ["numpy_convert", "numpy_correlate"]
 

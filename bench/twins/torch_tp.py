@@ -35,7 +35,7 @@ import torch
 from tpnet_gpu import operators, tables
 from tpnet_gpu.layout import HALF_TILE, NET_CROP
 
-from .common import N, SIDE, WIN, basis_expansion, conj_product_signs, correlation_weights
+from tpnet_gpu.bench.twins.common import N, SIDE, WIN, basis_expansion, conj_product_signs, correlation_weights
 
 CPU_CHUNK = 1024  # tiles per chunk on CPU: the work buffers (~3 MB each) stay in cache
 

@@ -18,8 +18,11 @@ import torch
 
 import tpnet_gpu.bench
 from tpnet_gpu import cli
-from tpnet_gpu.bench import bench_network, bench_throughput, bench_tp, common
-from tpnet_gpu.bench.throughput_report import ROWS
+from tpnet_gpu.bench import common
+from tpnet_gpu.bench.accuracy import bench_network
+from tpnet_gpu.bench.throughput import bench_throughput
+from tpnet_gpu.bench.throughput import bench_tp
+from tpnet_gpu.bench.throughput.throughput_report import ROWS
 
 TINY = ["--height", "32", "--width", "48", "--repeat", "1", "--device", "cpu"]  # 4 x 6 tiles
 PIPELINE = ["--pipeline-sizes", "64x48", "--pipeline-frames", "1", "--pipeline-backend", "warp"]  # 6 x 8 tiles
@@ -113,7 +116,7 @@ def test_bench_throughput_pipeline_only(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_bench_throughput_taichi_worker(tmp_path, capsys):
-    # One Taichi column: a worker process started as `python -m tpnet_gpu.bench.bench_throughput`.
+    # One Taichi column: a worker process started as `python -m tpnet_gpu.bench.throughput.bench_throughput`.
     argv = [*TINY, "--taichi-threads", "1", "--pipeline-sizes", ""]
     report, out, _ = run_bench(bench_throughput, argv, tmp_path, capsys)
     _check_throughput(report, ["warp", "numpy", "torch", "taichi-1t"])
@@ -124,7 +127,7 @@ def test_bench_throughput_taichi_worker(tmp_path, capsys):
 @pytest.mark.slow
 def test_bench_accuracy(tmp_path, capsys):
     pytest.importorskip("cv2", reason="bench_accuracy's peers need OpenCV (the optional 'bench' extra)")
-    from tpnet_gpu.bench import bench_accuracy
+    from tpnet_gpu.bench.accuracy import bench_accuracy
 
     png = tmp_path / "accuracy.png" if importlib.util.find_spec("matplotlib") else None
     # 128x64: SGBM needs an image wider than its disparity range; one re-centring pass keeps the peers short.
@@ -197,7 +200,7 @@ def test_bench_network_mono(tmp_path, capsys):
 
 
 def test_bench_network_limits(tmp_path, capsys):
-    from tpnet_gpu.bench import bench_network_limits as limits
+    from tpnet_gpu.bench.accuracy import bench_network_limits as limits
 
     argv = ["--scenes", "1", "--passes", "2", "--height", "64", "--width", "96"]
     report, out, err = run_bench(limits, argv, tmp_path, capsys)
@@ -215,7 +218,7 @@ def test_bench_network_limits(tmp_path, capsys):
 
 
 def test_bench_network_context(tmp_path, capsys):
-    from tpnet_gpu.bench import bench_network_context as context
+    from tpnet_gpu.bench.accuracy import bench_network_context as context
     from tpnet_gpu.net.context import context_step
 
     argv = ["--scenes", "2", "--check-from", "1", "--height", "64", "--width", "96"]
@@ -235,7 +238,7 @@ def test_bench_network_context(tmp_path, capsys):
 def test_bench_fuzz(tmp_path, capsys):
     # A short campaign in its child process: its counts add up (each case has at least 4 tile tasks) and the
     # oracles hold (the same ones as tests/fuzz).
-    from tpnet_gpu.bench import bench_fuzz
+    from tpnet_gpu.bench.fuzz import bench_fuzz
 
     report, out, err = run_bench(bench_fuzz, ["--examples", "12", "--soak", "101", "--pipeline", "2", "--raw", "100",
                                               "--cli", "2"], tmp_path, capsys)
@@ -250,9 +253,11 @@ def test_bench_fuzz(tmp_path, capsys):
 
 
 def test_every_bench_module_is_a_cli_choice():
-    names = {m.name.removeprefix("bench_") for m in pkgutil.iter_modules(tpnet_gpu.bench.__path__)
-             if m.name.startswith("bench_")}
-    assert names == set(cli.bench.BENCHES)
+    modules = {m.name.removeprefix("tpnet_gpu.bench.") for m in pkgutil.walk_packages(tpnet_gpu.bench.__path__,
+                                                                                      "tpnet_gpu.bench.")
+               if m.name.rpartition(".")[2].startswith("bench_")}
+    assert modules == set(cli.bench.BENCHES.values())
+    assert all(module.endswith(f"bench_{name}") for name, module in cli.bench.BENCHES.items())
 
 
 def test_cli_runs_a_bench_by_import(tmp_path, capsys):
@@ -281,7 +286,7 @@ def test_cli_missing_extra_is_one_line(monkeypatch, capsys):
 
 
 def test_python_dash_m_runs_a_bench():
-    done = subprocess.run([sys.executable, "-m", "tpnet_gpu.bench.bench_tp", "--repeat", "0"], capture_output=True,
+    done = subprocess.run([sys.executable, "-m", "tpnet_gpu.bench.throughput.bench_tp", "--repeat", "0"], capture_output=True,
                           text=True)
     assert done.returncode == 2 and "tpnet bench tp: error: --repeat: expected at least 1" in done.stderr
 
@@ -289,7 +294,7 @@ def test_python_dash_m_runs_a_bench():
 def test_bench_startup(tmp_path, capsys):
     # Warm rows only (--cache: the environment's kernel caches), one tiny frame, the Warp backend; two runs, as a
     # second run once failed (it wrote into the first one's output folder, which `tpnet process` refuses).
-    from tpnet_gpu.bench import bench_startup
+    from tpnet_gpu.bench.throughput import bench_startup
     from tpnet_gpu.runtime.taichi_setup import cache_dir
 
     argv = ["--sizes", "32x32", "--backends", "warp", "--repeat", "2", "--cache", str(cache_dir().parent)]
@@ -307,7 +312,7 @@ def test_bench_startup(tmp_path, capsys):
 def test_bench_ray(tmp_path, capsys):
     # One tiny scene, serial rows and a 1-worker Ray; every row's outputs must equal the first's (the bench checks).
     pytest.importorskip("ray", reason="the ray extra is not installed (pip install 'tpnet-gpu[ray]')")
-    from tpnet_gpu.bench import bench_ray
+    from tpnet_gpu.bench.throughput import bench_ray
 
     report, out, err = run_bench(bench_ray, ["--scenes", "1", "--size", "64x48", "--workers", "1"], tmp_path, capsys)
     assert {"bench", "scenes", "width", "height", "rows", "machine", "ray_start_stop_s", "table"} <= set(report)

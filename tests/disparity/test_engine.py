@@ -221,7 +221,7 @@ def test_first_row_of_an_object_between_sparse_tiles_is_read_at_the_object(monke
 def test_tiles_reading_nan_pixels_are_not_filled():
     """A 64x64 hole of NaN pixels in every camera of the quad's demo scene: ``grid.fill`` gives values only to
     tiles whose windows hold data. Oracle: the tile processor's own validity of each filled tile's windows at its
-    disparity (its NaN masking is tested on its own, tests/test_boundary_issue16.py). Measured before the guard:
+    disparity (its NaN masking is tested on its own, tests/test_public_boundary.py). Measured before the guard:
     tile (15, 15), whose windows reach into the hole, was filled with its neighbours' 0.3 px."""
     rendered = rendered_scene(RIGS["quad"])
     frames = rendered.raws.astype(np.float32) - rendered.sensor.black_level

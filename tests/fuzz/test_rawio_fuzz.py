@@ -1,6 +1,6 @@
 """Property-based slice of the issue-16 fuzz campaign over the raw readers (CI: derandomized, small).
 
-What is drawn and the oracle: bench/fuzz_raw_cases.py's docstring (small DNGs and TIFFs, Bayer or not, with
+What is drawn and the oracle: bench/fuzz/fuzz_raw_cases.py's docstring (small DNGs and TIFFs, Bayer or not, with
 bytes flipped, headers damaged, truncated, junk appended or emptied; each read gives a Bayer ``RawFrame``, a
 ``RawFormatError`` naming the file, or for a bad CFA name a ``ValueError`` naming ``cfa`` - never another
 exception, a crash or a hang). The reads run in a child process (LibRaw is native code). 4 batches of 25 files,
@@ -10,7 +10,7 @@ exception, a crash or a hang). The reads run in a child process (LibRaw is nativ
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from tpnet_gpu.bench.fuzz_raw_cases import raw_case, run
+from tpnet_gpu.bench.fuzz.fuzz_raw_cases import raw_case, run
 
 FUZZ = settings(derandomize=True, max_examples=4, deadline=None, database=None, phases=[Phase.generate],  # no
                 # shrinking: each try is a child process; the failing case is printed whole

@@ -18,7 +18,7 @@ Drawn: frame size, mono or Bayer, dtype, pixel magnitude (0, tiny, ordinary, 16-
 
 from hypothesis import HealthCheck, given, settings
 
-from tpnet_gpu.bench.fuzz_cases import cases, check
+from tpnet_gpu.bench.fuzz.fuzz_cases import cases, check
 
 FUZZ = settings(derandomize=True, max_examples=100, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])

@@ -28,8 +28,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from tpnet_gpu.bench import real_pairs as rp
-from tpnet_gpu.bench.rendered_pairs import pair_rig
+from tpnet_gpu.bench.accuracy import real_pairs as rp
+from tpnet_gpu.bench.accuracy.rendered_pairs import pair_rig
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.scenes import textures as tx
 from tpnet_gpu.scenes.image_pairs import GT_SCALE, ImagePair, Impairments, render_pair, write_pair

@@ -13,7 +13,7 @@ the JSON is rewritten after every step, so a killed run still leaves what it did
   convert + correlate) at 640x480 and 2592x1936, graph capture off and on: build, first call (compile / record),
   median of --repeat (10) after that warm-up, peak device memory.
 * ``pipeline_640x480``: ``Pipeline.process`` on the rendered demo scene: median frame of --repeat after a warm-up
-  frame, then per stage (bench/throughput_pipeline.py's stage clock: engine search, engine refine, network,
+  frame, then per stage (bench/throughput/throughput_pipeline.py's stage clock: engine search, engine refine, network,
   texture, rest).
 * ``determinism``: two runs bit-equal (float bits, NaN included): the processor's clt, corr, layers and texture
   with graphs off and on (and off vs on), and the pipeline's disparity, confidence and texture.

@@ -177,7 +177,7 @@ def step_tp(args) -> dict:
 def step_pipeline(args, width: int, height: int, scene: str) -> dict:
     import torch
 
-    from tpnet_gpu.bench.throughput_pipeline import STAGES, StageClock, scene_frames
+    from tpnet_gpu.bench.throughput.throughput_pipeline import STAGES, StageClock, scene_frames
     from tpnet_gpu.pipeline import Pipeline
 
     sync = make_sync(args.device)
@@ -204,7 +204,7 @@ def step_pipeline(args, width: int, height: int, scene: str) -> dict:
 def step_determinism(args) -> dict:
     import torch
 
-    from tpnet_gpu.bench.throughput_pipeline import scene_frames
+    from tpnet_gpu.bench.throughput.throughput_pipeline import scene_frames
     from tpnet_gpu.pipeline import Pipeline
     from tpnet_gpu.processor import TileProcessor
 

@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-# name -> the module (under tpnet_gpu.bench) whose main(args) runs it
-BENCHES = {name: f"bench_{name}" for name in (
-    "tp", "accuracy", "network", "network_limits", "network_context", "throughput", "startup", "fuzz", "calibration",
-    "ray", "flow", "two_surface", "real", "rendered_pairs")}
+# name -> the module (under tpnet_gpu.bench, by group) whose main(args) runs it
+GROUPS = {
+    "accuracy": ("accuracy", "network", "network_limits", "network_context", "calibration", "flow", "two_surface",
+                 "real", "rendered_pairs"),
+    "throughput": ("tp", "throughput", "startup", "ray"),
+    "fuzz": ("fuzz",),
+}
+BENCHES = {name: f"{group}.bench_{name}" for group, names in GROUPS.items() for name in names}
 
 
 def run(args: argparse.Namespace) -> int:
