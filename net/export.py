@@ -17,7 +17,8 @@ import torch
 from torch import Tensor, nn
 
 from tpnet_gpu.net.frame import frame_residual
-from tpnet_gpu.net.model import CORR_SIZE, TPNet
+from tpnet_gpu.net.functional import CORR_SIZE
+from tpnet_gpu.net.model import TPNet
 
 OPSET = 18  # the opset the exporter was checked with (onnxruntime 1.2x runs it)
 INPUTS = ("layers", "target")

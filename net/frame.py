@@ -13,7 +13,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from tpnet_gpu.net.checks import clone_list, frame_grid
-from tpnet_gpu.net.model import (
+from tpnet_gpu.net.functional import (
     CLONE_RADII, CLUSTER_SIDE, CLUSTER_TILES, CORR_SIZE, NEGATIVE_SLOPE, Layer, check_layers, clone_masks,
     stage1_features, stage2_output, tile_inputs,
 )

@@ -108,6 +108,14 @@ def test_weights_shipped_on_request_run_only_when_asked(shipped, caplog):
         Pipeline(H, W, rig=_rig("two_quads"), device="cpu", config=replace(NO_TEXTURES, method="tpnet"))
 
 
+def test_the_shipped_quad_mono_weights_are_the_default_for_mono_quad_frames():
+    """Mono frames of the quad take the quad's mono weights by default; Bayer frames keep the default weights."""
+    found = infer.shipped_for(infer.lags(), 1)
+    assert found is not None and found.name == "tpnet_quad_mono_v1.pt" and infer.on_request(found) is None
+    assert infer.correlation(found).colour_weights == (1.0,) and infer.load(found).layers == 4
+    assert infer.shipped_for(infer.lags(), 3) == infer.DEFAULT_WEIGHTS
+
+
 def test_the_shipped_mono_pair_weights_run_on_request():
     """The shipped mono binocular weights are found only when asked for, and their recipe says why."""
     assert infer.shipped_for(((1.0, 0.0),), 1) is None

@@ -67,6 +67,7 @@ import warp as wp
 
 from tpnet_gpu import tables
 from tpnet_gpu.net import frame as net_frame
+from tpnet_gpu.net import functional as net_functional
 from tpnet_gpu.net import model as net_model
 from tpnet_gpu.processor import BACKENDS, TileProcessor
 from tpnet_gpu.runtime.warp_setup import default_device, init_warp
@@ -93,7 +94,7 @@ def _params(net: net_model.TPNet):
 
 def network_stage1(net: net_model.TPNet, layers: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """Stage-1 features ``(ty, tx, F)``: tile inputs (layers + target, NaN -> 0) through the per-tile MLP."""
-    return net_model.stage1_features(net_model.tile_inputs(layers, target), _params(net)[0])
+    return net_functional.stage1_features(net_functional.tile_inputs(layers, target), _params(net)[0])
 
 
 def network_stage2(net: net_model.TPNet, features: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

@@ -25,6 +25,20 @@ def test_missing_scene(tmp_path, capsys):
     assert not (tmp_path / "out.json").exists()
 
 
+def test_rounds_are_the_librarys_to_refuse(tmp_path, capsys, monkeypatch):
+    """``--rounds 0`` is refused by ``CalibrationConfig`` (the library's one check), in one line, before any scene
+    is read; without ``--rounds`` the library's default runs."""
+    from tpnet_gpu.calibration import CalibrationConfig
+    from tpnet_gpu.scenes import folder
+
+    monkeypatch.setattr(folder, "load", lambda *a, **k: pytest.fail("a scene read before --rounds was checked"))
+    code, err = _run(capsys, str(tmp_path), "--rig", "quad", "--out", str(tmp_path / "o.json"), "--rounds", "0")
+    assert code == 2 and len(err) == 1 and err[0] == "tpnet calibrate: error: rounds: expected an int >= 1, got 0"
+    assert cli.build_parser().parse_args(["calibrate", "s", "--rig", "quad", "--out", "o.json"]).rounds is None
+    with pytest.raises(ValueError, match=r"tolerance: expected a finite number of pixels > 0, got nan"):
+        CalibrationConfig(tolerance=float("nan"))
+
+
 def test_bad_rig_file(tmp_path, capsys):
     bad = tmp_path / "rig.json"
     bad.write_text("{not json")

@@ -12,15 +12,15 @@ import pytest
 import torch
 
 from tpnet_gpu.net.losses import main_loss
-from tpnet_gpu.net.model import (
+from tpnet_gpu.net.functional import (
     CENTRE,
-    TPNet,
     clusters_residual,
     gather_clusters,
     stage1_features,
     stage2_output,
     tile_inputs,
 )
+from tpnet_gpu.net.model import TPNet
 from tpnet_gpu.net.neighbours import frame_relative_targets
 
 ATOL = 1e-5

@@ -30,6 +30,14 @@ class CalibrationConfig:
     gradient_steps: int = 10
     gradient_tiles: int = 300
 
+    def __post_init__(self):
+        for name in ("rounds", "gradient_steps", "gradient_tiles"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name}: expected an int >= 1, got {value!r}")
+        if not (isinstance(self.tolerance, (int, float)) and np.isfinite(self.tolerance) and self.tolerance > 0):
+            raise ValueError(f"tolerance: expected a finite number of pixels > 0, got {self.tolerance!r}")
+
 
 @dataclass(frozen=True)
 class CalibrationResult:

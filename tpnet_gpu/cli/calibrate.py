@@ -39,8 +39,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not args.overwrite:  # before the work, not after it
         raise ValueError(f"--out: expected a new file (or --overwrite), got {out}, which exists")
-    if args.rounds < 1:
-        raise ValueError(f"--rounds: expected at least 1, got {args.rounds}")
+    # the library's default and its check (rounds >= 1), before the work
+    config = CalibrationConfig() if args.rounds is None else CalibrationConfig(rounds=args.rounds)
     rig = rigfile.load(args.rig)
     frames = []
     for folder in args.scenes:
@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"{folder}: expected {rig.width}x{rig.height} frames (--rig), got "
                              f"{scene.rig.width}x{scene.rig.height}")
         frames.append(Frame(scene.frames, scene.cfa))
-    result = calibrate(frames, rig, method=args.method, config=CalibrationConfig(rounds=args.rounds),
+    result = calibrate(frames, rig, method=args.method, config=config,
                        device=args.device, log=lambda m: print(m, file=sys.stderr))
     moved = edge_misalignment(rig, result.extrinsics, rig.extrinsics)
     write_rig_atomically(result.rig, out, overwrite=args.overwrite,
@@ -73,7 +73,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
                      help="the rig to start from: a rig file (.json/.toml, docs/rig_file.md) or a shipped one (quad)")
     cal.add_argument("--out", required=True, metavar="OUT", help="the calibrated rig file to write (.json/.toml)")
     cal.add_argument("--method", choices=("lma", "gradient"), default="lma", help="the fit (default lma)")
-    cal.add_argument("--rounds", type=int, default=4, help="most measure + fit rounds (default 4)")
+    cal.add_argument("--rounds", type=int, default=None, help="most measure + fit rounds (default: the library's, "
+                     "CalibrationConfig.rounds)")
     cal.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
     cal.add_argument("--overwrite", action="store_true", help="replace an existing --out file (default: refuse)")
     cal.set_defaults(func=run)
