@@ -309,3 +309,24 @@ class PipelineConfig:
             raise ValueError(f"min_confidence: expected a finite number >= 0, got {self.min_confidence!r}")
         if not (isinstance(self.keep_fraction, (int, float)) and 0.0 < self.keep_fraction <= 1.0):
             raise ValueError(f"keep_fraction: expected a number in (0, 1], got {self.keep_fraction!r}")
+
+
+def disparity_range(min_disparity, max_disparity, rig, nearest_m: float) -> tuple[float, float]:
+    """The range the disparity engine searches, px - its one home and default (``DisparityEngine``,
+    ``Pipeline``, ``make_pipeline`` take ``min_disparity`` / ``max_disparity``): ``(min_disparity,
+    max_disparity)`` checked (finite, max > min); None takes the default: 0 for the minimum, ``rig``'s
+    (a ``camera.Rig``) disparity at ``nearest_m`` metres (``EngineConfig.nearest_m``) for the maximum."""
+    min_disparity = 0.0 if min_disparity is None else min_disparity
+    values = {"min_disparity": min_disparity, "max_disparity": max_disparity}
+    for name, value in values.items():
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+                or not np.isfinite(value):
+            raise ValueError(f"{name}: expected a finite number of pixels, got {value!r}")
+    low = float(min_disparity)
+    high = float(rig.disparity(nearest_m)) if max_disparity is None else float(max_disparity)
+    if high <= low:
+        raise ValueError(f"max_disparity: expected more than min_disparity={low:g}, got {high:g}"
+                         + (f" (the rig's disparity at {nearest_m:g} m)" if max_disparity is None else ""))
+    return low, high

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig
+from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig, disparity_range
 from tpnet_gpu.disparity.grid import fill, neighbourhood, ring_median, settle, two_depth
 from tpnet_gpu.disparity.measure import CHUNK, Measurer, row_chunks
 from tpnet_gpu.disparity.occlusion import Occlusion, lowest
@@ -95,25 +95,6 @@ def correlation_for(cfa: str | None) -> CorrelationConfig:
     return BASELINE_CORRELATION if cfa is not None else CorrelationConfig(fat_zero=BASELINE_CORRELATION.fat_zero)
 
 
-def disparity_range(min_disparity, max_disparity, rig: Rig, nearest_m: float) -> tuple[float, float]:
-    """The range searched, px: ``(min_disparity, max_disparity)`` checked (finite, max > min); None takes the
-    default: 0 for the minimum, ``rig``'s disparity at ``nearest_m`` metres for the maximum."""
-    min_disparity = 0.0 if min_disparity is None else min_disparity
-    values = {"min_disparity": min_disparity, "max_disparity": max_disparity}
-    for name, value in values.items():
-        if value is None:
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
-                or not np.isfinite(value):
-            raise ValueError(f"{name}: expected a finite number of pixels, got {value!r}")
-    low = float(min_disparity)
-    high = float(rig.disparity(nearest_m)) if max_disparity is None else float(max_disparity)
-    if high <= low:
-        raise ValueError(f"max_disparity: expected more than min_disparity={low:g}, got {high:g}"
-                         + (f" (the rig's disparity at {nearest_m:g} m)" if max_disparity is None else ""))
-    return low, high
-
-
 class DisparityEngine:
     """Disparity of frames ``(cams, height, width)`` from any rig (see the module docstring).
 
@@ -123,7 +104,7 @@ class DisparityEngine:
         pairs: camera pairs to correlate (default: every pair of the rig, the quad's 6 in the spec's order).
         cfa: Bayer pattern or None (mono).
         min_disparity, max_disparity: the range searched, px (None: 0, and the rig's disparity at
-            ``config.nearest_m``; ``disparity_range``).
+            ``config.nearest_m``; ``config.disparity_range``).
         config: search and refinement settings.
         textures: build the full-resolution processor with textures (the pipeline shares it for the texture).
     """
