@@ -31,7 +31,10 @@ work on the correlations (cost volumes, SGM) is not counted.
 
 from __future__ import annotations
 
+import os
+import re
 from dataclasses import dataclass
+from pathlib import Path
 
 from tpnet_gpu import tables
 from tpnet_gpu.layout import CORR_SIDE, DTT_SIZE, NET_LAYERS, NET_SIDE, PAD, TILE_SIZE, TILE_STRIDE
@@ -155,3 +158,22 @@ def tp_rows_floor(height: int, width: int, colours: int, net) -> dict[str, dict]
     network = network_work(net, (height // TILE_STRIDE) * (width // TILE_STRIDE))
     return {"TP whole frame": floor(tp), "network whole frame": floor(network),
             "TP+network whole frame": floor(tp + network)}
+
+
+def cpu_peak(cpuinfo: str | None = None, cores: int | None = None) -> dict:
+    """This CPU's FP32 peak, estimated from ``/proc/cpuinfo`` (or the text ``cpuinfo``): the cores this process may
+    use x the clock (the largest "cpu MHz") x FP32 FLOPs per cycle per core from its vector units (two FMA units:
+    AVX-512 64, AVX2 + FMA 32, AVX 16, else SSE 8). An estimate (turbo, thermal and shared-core effects aside): the
+    roof the TP pass's FLOPs are set against, not a measurement."""
+    if cpuinfo is None:
+        path = Path("/proc/cpuinfo")
+        cpuinfo = path.read_text() if path.exists() else ""
+    cores = cores if cores is not None else len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
+        else os.cpu_count() or 1
+    mhz = [float(v) for v in re.findall(r"^cpu MHz\s*:\s*([0-9.]+)", cpuinfo, flags=re.M)]
+    flags = set(next(iter(re.findall(r"^flags\s*:\s*(.*)$", cpuinfo, flags=re.M)), "").split())
+    per_cycle = 64 if "avx512f" in flags else 32 if {"avx2", "fma"} <= flags else 16 if "avx" in flags else 8
+    ghz = max(mhz) / 1e3 if mhz else float("nan")
+    name = next(iter(re.findall(r"^model name\s*:\s*(.*)$", cpuinfo, flags=re.M)), "CPU").strip()
+    return {"name": name, "cores": cores, "ghz": ghz, "fp32_flops_per_cycle": per_cycle,
+            "fp32_flops_per_s": cores * ghz * 1e9 * per_cycle}

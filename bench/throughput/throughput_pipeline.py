@@ -14,8 +14,10 @@ their end. So per frame: **engine search** = start -> end of ``search`` (normali
 
 Beside it, on the same frame: one full-frame tile-processor pass at the engine's first-stage answer (centres,
 convert, correlate with layers: ``DisparityEngine.measure_at``) and the torch twin's convert + correlate +
-``torch_layers`` at the same tile centres (their correlations compared), and the frame's floor on the H200
-(throughput_floor.py).
+``torch_layers`` at the same tile centres (their correlations compared), the frame's floor on the H200
+(throughput_floor.py), on the CPU that pass against this CPU's FP32 roofline (``throughput_floor.cpu_peak``), and
+OpenCV StereoSGBM on two cameras of the same frame timed in the same run (the ratio: what a user would run
+instead).
 """
 
 from __future__ import annotations
@@ -35,7 +37,8 @@ from tpnet_gpu.pipeline import Pipeline
 from tpnet_gpu.bench import common
 from tpnet_gpu.bench.common import PAPER_GPU, PAPER_TP_MS, format_table, random_frames, summary, timed_ms
 from tpnet_gpu.bench.throughput.throughput_common import agreement, log
-from tpnet_gpu.bench.throughput.throughput_floor import H200, floor, network_work, pipeline_work, tp_pass, tp_steps
+from tpnet_gpu.bench.throughput.throughput_floor import H200, cpu_peak, floor, network_work, pipeline_work, tp_pass, \
+    tp_steps
 from tpnet_gpu.bench.throughput.throughput_report import PAPER_NETWORK_S
 from tpnet_gpu.bench.twins.torch_tp import torch_convert, torch_correlate, torch_layers
 
@@ -142,6 +145,32 @@ def _tp_pass_rows(pipe: Pipeline, frames_t: torch.Tensor, target: torch.Tensor, 
                     "twin: torch_convert + torch_correlate + torch_layers at the same tile centres"}
 
 
+def _sgbm_row(frames_t: torch.Tensor, max_disparity: float, repeat: int) -> dict | None:
+    """OpenCV StereoSGBM (``twins/peers.py``) on cameras 0 and 1 of the same frame (the quad's top pair, a
+    horizontal baseline), over the pipeline's disparity range: what a user would run instead, timed in the same run
+    (its accuracy is not compared here). None without OpenCV (the ``bench`` extra)."""
+    try:
+        import cv2  # noqa: F401, PLC0415 - only to know it is there
+    except ModuleNotFoundError:
+        return None
+    from tpnet_gpu.bench.twins import peers  # noqa: PLC0415
+
+    left, right = (frames_t[cam].detach().cpu().numpy() for cam in (0, 1))
+    reach = min(float(max_disparity), left.shape[1] / 2 - 8)  # SGBM's range must fit the image's width
+    runs = [timed_ms(lambda: peers.sgbm(left, right, reach)) for _ in range(repeat + 1)][1:]
+    return {"ms": summary(runs), "max_disparity": reach,
+            "what": "cv2 StereoSGBM 3WAY, block 5, cameras 0 and 1 as 8-bit images, the pipeline's range (at most "
+                    "half the width)"}
+
+
+def _roofline(work, measured_ms: float) -> dict:
+    """One TP pass against this CPU's FP32 peak (``cpu_peak``): its floor and the share of the peak it reached."""
+    peak = cpu_peak()
+    floor_ms = 1e3 * work.flops / peak["fp32_flops_per_s"]
+    return {**peak, "tp_pass_gflop": work.flops / 1e9, "tp_pass_floor_ms": floor_ms,
+            "share_of_peak": floor_ms / measured_ms}
+
+
 def run_pipeline(width: int, height: int, args, device, sync) -> dict:
     """The pipeline rows of one frame size (see the module docstring)."""
     frames = scene_frames(width, height, args.pipeline_scene, args.seed)
@@ -162,6 +191,7 @@ def run_pipeline(width: int, height: int, args, device, sync) -> dict:
         result = clock.result
         tile_passes = float(result.tile_passes)
         tp_rows = _tp_pass_rows(pipe, frames_t, result.search.clone(), sync, args.pipeline_frames)
+    peer = _sgbm_row(frames_t, pipe.engine.d_max, args.pipeline_frames)
     tp = pipe.engine.tp
     steps = tp_steps(height, width, tp.cams, tp.colours, len(tp.pairs), tp.pairs == tables.QUAD_PAIRS)
     net = network_work(pipe.model, tp.tiles) if pipe.model is not None else None
@@ -180,6 +210,9 @@ def run_pipeline(width: int, height: int, args, device, sync) -> dict:
         "twin_tp_estimate_ms": passes * tp_rows["torch_twin_ms"]["median"],
         "twin_tp_estimate_note": f"(engine tile_passes + network passes) = {passes:.2f} full-frame passes at the "
                                  f"torch twin's speed: the tile-processor work of a frame, had it no masked passes",
+        "sgbm": peer,
+        "sgbm_ratio": None if peer is None else summary(whole)["median"] / peer["ms"]["median"],
+        "cpu_roofline": None if device.is_cuda else _roofline(tp_pass(steps), tp_rows["processor_ms"]["median"]),
         "floor": {"gpu": H200["name"], "tp_pass": floor(tp_pass(steps)),
                   "network": floor(net) if net is not None else None,
                   "frame": floor(pipeline_work(steps, net, tile_passes, network_passes, textures))},
@@ -222,19 +255,21 @@ def print_pipeline(section: dict, device_name: str) -> None:
         rows.append((f"{size} ({device_name}, {r['backend']})", ms(r["process_ms"]), f"{r['fps']:.2f}",
                      *(ms(r["stages_ms"][s]) for s in STAGES), f"{r['tile_passes']:.2f}",
                      ms(r["tp_pass"]["processor_ms"]), ms(r["tp_pass"]["torch_twin_ms"]),
-                     f"{r['tp_pass']['ratio_torch_over_processor']:.2f}", ms(r["twin_tp_estimate_ms"])))
+                     f"{r['tp_pass']['ratio_torch_over_processor']:.2f}", ms(r["twin_tp_estimate_ms"]),
+                     "-" if r["sgbm"] is None else ms(r["sgbm"]["ms"]),
+                     "-" if r["sgbm_ratio"] is None else f"{r['sgbm_ratio']:.1f}"))
     p = section["paper"]
     rows.append((f"paper {p['size']['width']}x{p['size']['height']} ({p['gpu']})", ms(p["tp_ms"] + p["network_ms"]),
                  f"{1e3 / (p['tp_ms'] + p['network_ms']):.2f}", "-", "-", ms(p["network_ms"]), "-", "-", "-",
-                 ms(p["tp_ms"]), "-", "-", "-"))
+                 ms(p["tp_ms"]), "-", "-", "-", "-", "-"))
     for r in section["rows"]:
         f = r["floor"]
         net = f["network"]["floor_ms"] if f["network"] else 0.0
         rows.append((f"{r['size']['width']}x{r['size']['height']} floor ({section['floor_gpu']['name']})",
                      ms(f["frame"]["floor_ms"]), f"{1e3 / f['frame']['floor_ms']:.0f}", "-", "-", ms(net), "-", "-",
-                     "-", ms(f["tp_pass"]["floor_ms"]), "-", "-", "-"))
+                     "-", ms(f["tp_pass"]["floor_ms"]), "-", "-", "-", "-", "-"))
     header = ("Pipeline.process", "frame ms", "fps", *(f"{s} ms" for s in STAGES), "tile passes", "TP pass ms",
-              "twin pass ms", "twin/ours", "twin TP est. ms")
+              "twin pass ms", "twin/ours", "twin TP est. ms", "SGBM ms", "ours/SGBM")
     print("\n".join(format_table(header, rows)))
     print(f"pipeline: {section['timing']}; TP pass = one full-frame pass of the engine's processor (the "
           f"project's kernels in the pipeline's backend; twin: plain PyTorch ops on the same device); twin TP est. = the frame's passes at "
@@ -246,3 +281,13 @@ def print_pipeline(section: dict, device_name: str) -> None:
               f"{f['compute_ms']:.3f} ms at {section['floor_gpu']['fp32_flops_per_s'] / 1e12:g} TFLOPS FP32 "
               f"({f['bound']} bound); measured / floor {r['process_ms']['median'] / f['floor_ms']:.0f}x; twin vs "
               f"processor corr max relative difference {a['max_rel_diff']:.2e}")
+        roof = r["cpu_roofline"]
+        if roof is not None:
+            print(f"CPU roofline {r['size']['width']}x{r['size']['height']}: one TP pass {roof['tp_pass_gflop']:.2f} "
+                  f"GFLOP; {roof['name']}, {roof['cores']} cores x {roof['ghz']:.2f} GHz x "
+                  f"{roof['fp32_flops_per_cycle']} FP32 FLOP/cycle = {roof['fp32_flops_per_s'] / 1e9:.0f} GFLOPS -> "
+                  f"{roof['tp_pass_floor_ms']:.1f} ms; measured {r['tp_pass']['processor_ms']['median']:.1f} ms = "
+                  f"{100 * roof['share_of_peak']:.0f} % of the peak")
+    if any(r["sgbm"] is not None for r in section["rows"]):
+        print("SGBM: " + next(r["sgbm"]["what"] for r in section["rows"] if r["sgbm"] is not None)
+              + "; ours/SGBM = the whole frame's time over SGBM's on two of its cameras")

@@ -93,6 +93,11 @@ def _check_pipeline(section: dict, scene: str) -> None:
     assert row["tp_pass"]["corr_agreement"]["max_rel_diff"] < 1e-4  # the twin against the engine's processor
     assert row["floor"]["frame"]["floor_ms"] > row["floor"]["tp_pass"]["floor_ms"] > 0
     assert section["paper"]["tp_ms"] == 87.0
+    # the peer in the same run (OpenCV is in the test extra) and this CPU's roofline for the TP pass
+    assert row["sgbm"]["ms"]["median"] > 0 and row["sgbm_ratio"] == pytest.approx(
+        row["process_ms"]["median"] / row["sgbm"]["ms"]["median"])
+    roof = row["cpu_roofline"]
+    assert roof["fp32_flops_per_s"] > 0 and 0 < roof["share_of_peak"] < 1
 
 
 def test_bench_throughput_without_taichi(tmp_path, capsys):
@@ -111,7 +116,7 @@ def test_bench_throughput_pipeline_only(tmp_path, capsys):
     report, out, _ = run_bench(bench_throughput, argv, tmp_path, capsys)
     assert set(report) == {"pipeline", "device", "machine"}
     _check_pipeline(report["pipeline"], "random")
-    assert "convert" not in out and "64x48 floor" in out
+    assert "convert" not in out and "64x48 floor" in out and "CPU roofline 64x48" in out and "ours/SGBM" in out
 
 
 @pytest.mark.slow

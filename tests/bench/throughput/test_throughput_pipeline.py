@@ -56,6 +56,16 @@ def test_floor_is_the_slower_of_memory_and_compute():
     assert f["floor_ms"] == f["memory_ms"] and f["bound"] == "memory"
 
 
+def test_cpu_peak_is_cores_times_clock_times_vector_width():
+    # by hand: 2 cores x 2.5 GHz x 32 FP32 FLOP/cycle (AVX2 + FMA: two 8-wide FMA units) = 160 GFLOPS; AVX-512: 64
+    info = "model name\t: Test CPU\ncpu MHz\t\t: 2400.000\nflags\t\t: sse avx avx2 fma\ncpu MHz\t\t: 2500.000\n"
+    peak = fl.cpu_peak(info, cores=2)
+    assert (peak["name"], peak["ghz"], peak["fp32_flops_per_cycle"]) == ("Test CPU", 2.5, 32)
+    assert peak["fp32_flops_per_s"] == pytest.approx(160e9)
+    assert fl.cpu_peak(info.replace("avx2 fma", "avx2 fma avx512f"), cores=1)["fp32_flops_per_s"] == pytest.approx(160e9)
+    assert fl.cpu_peak("flags : sse\ncpu MHz : 1000\n", cores=4)["fp32_flops_per_s"] == pytest.approx(32e9)
+
+
 def test_pipeline_frame_counts_every_pass():
     steps = fl.tp_steps(H, W, 4, 3, 6, layers=True)
     net = fl.Work(1.0, 2.0)
