@@ -27,14 +27,33 @@ def load(path=None, device=None) -> TPNet:
     if not path.exists():
         raise FileNotFoundError(f"{path}: no TPNET weights there (train some with `tpnet train`)")
     model = TPNet(layers=len(lags(path)))
-    try:
-        model.load_state_dict(torch.load(path, map_location="cpu", weights_only=True))
-    except (pickle.UnpicklingError, RuntimeError, EOFError, KeyError, TypeError, ValueError) as exc:
-        # torch's messages (several paragraphs on weights_only, or a list of missing keys) omit the file
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-        raise ValueError(f"weights: {path} is not a file of TPNET weights ({type(exc).__name__}: {first[:200]})") \
-            from exc
+    load_state(model, read_tensors(path, "weights", "TPNET weights"), path, "weights")
     return model.to(device or "cpu").eval()
+
+
+def read_tensors(path, option: str, what: str, map_location="cpu"):
+    """The tensors, numbers, strings, lists and dicts saved at ``path`` by ``torch.save`` - never unpickling
+    anything else (``weights_only=True``: a crafted file cannot run code) - or a ``ValueError`` naming ``option``
+    and the file (a truncated, crafted or foreign file), one line."""
+    try:
+        return torch.load(path, map_location=map_location, weights_only=True)
+    except (pickle.UnpicklingError, RuntimeError, EOFError, KeyError, TypeError, ValueError, AttributeError,
+            IndexError, OverflowError, RecursionError, MemoryError, OSError) as exc:  # OSError: a broken zip
+        raise ValueError(f"{option}: {path} is not a file of {what} ({_first_line(exc)})") from exc
+
+
+def load_state(module, state, path, option: str) -> None:
+    """``module.load_state_dict(state)``, a mismatch a ``ValueError`` naming ``option`` and the file."""
+    try:
+        module.load_state_dict(state)
+    except (RuntimeError, KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ValueError(f"{option}: {path} does not hold the expected state ({_first_line(exc)})") from exc
+
+
+def _first_line(exc: BaseException) -> str:
+    """``exc``'s type and the first line of its message (torch's run to several paragraphs), at most 200 chars."""
+    text = str(exc).strip()
+    return f"{type(exc).__name__}: {(text.splitlines()[0] if text else '')[:200]}"
 
 
 def recipe(path=None) -> dict:

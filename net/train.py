@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from tpnet_gpu.config import TrainConfig  # noqa: F401 - re-exported: the training settings live in config
+from tpnet_gpu.net import infer
 from tpnet_gpu.net.layers import QUAD_LAGS, lags_match, rig_lags
 from tpnet_gpu.net.losses import main_loss, mirror_loss_frame, weights_loss
 from tpnet_gpu.net.model import TPNet
@@ -184,17 +185,22 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
     if config.init is not None:  # fine-tuning: start from these weights (a checkpoint still takes precedence)
         if not Path(config.init).exists():
             raise FileNotFoundError(f"init: {config.init}: no weights there")
-        model.load_state_dict(torch.load(config.init, map_location="cpu", weights_only=True))
+        infer.load_state(model, infer.read_tensors(config.init, "init", "TPNET weights"), config.init, "init")
     model = model.to(device)
     optimiser = torch.optim.Adam(model.parameters(), lr=LR_STEPS[0][1])
     start_epoch, history, pass_targets = 0, [], None
     checkpoint = Path(checkpoint) if checkpoint else None
     if checkpoint is not None and checkpoint.exists():
-        state = torch.load(checkpoint, weights_only=False, map_location=device)
-        model.load_state_dict(state["model"])
-        optimiser.load_state_dict(state["optimiser"])
+        # tensors and plain data only: a crafted checkpoint cannot run code (issue 40)
+        state = infer.read_tensors(checkpoint, "checkpoint", "a training checkpoint", map_location=device)
+        if not isinstance(state, dict) or not {"model", "optimiser", "epoch", "history"} <= set(state):
+            raise ValueError(f"checkpoint: {checkpoint} is not a training checkpoint (expected the keys model, "
+                             "optimiser, epoch, history)")
+        infer.load_state(model, state["model"], checkpoint, "checkpoint")
+        infer.load_state(optimiser, state["optimiser"], checkpoint, "checkpoint")
         start_epoch, history = state["epoch"], state["history"]
         pass_targets = state.get("pass_targets")
+        pass_targets = None if pass_targets is None else [torch.as_tensor(t).cpu().numpy() for t in pass_targets]
         log(f"resumed from {checkpoint} at epoch {start_epoch}")
     measure = None
     n_samples = len(train_samples) + (len(train_chunks) if config.pass_every is not None else 0)
@@ -233,7 +239,10 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
         if checkpoint is not None:
             checkpoint.parent.mkdir(parents=True, exist_ok=True)
             torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch + 1,
-                        "history": history, "config": asdict(config), "pass_targets": pass_targets}, checkpoint)
+                        "history": history, "config": asdict(config),
+                        # as tensors: the checkpoint is read back with weights_only (no NumPy pickles)
+                        "pass_targets": None if pass_targets is None else [torch.from_numpy(t) for t in pass_targets]},
+                       checkpoint)
     rig_arg = "" if manifest["spec"].get("rig") is None else f" --rig {_rig_argument(manifest['spec']['rig'])}"
     mono_arg = (" --mono" if "cfa" in manifest["spec"] and manifest["spec"]["cfa"] is None else "") + (
         " --photo" if manifest["spec"].get("photo") else "")

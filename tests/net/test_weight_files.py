@@ -1,0 +1,75 @@
+"""Files that hold weights or training state are never unpickled (issue 40): every door that reads one -
+``--weights`` (process, demo, export), ``train --init``, ``train --checkpoint`` - reads tensors and plain data
+only, and a crafted, truncated or foreign file is one ``ValueError`` line naming the option and the file.
+Oracles: a pickle whose loading would create a marker file (it must not appear), a truncated copy of real
+weights, and the CLI's one-line contract."""
+
+import os
+import pickle
+
+import pytest
+import torch
+
+from tests.net.test_train import data  # noqa: F401 - the tiny rendered data set (a module fixture)
+from tpnet_gpu.cli import main
+from tpnet_gpu.net import infer
+from tpnet_gpu.net.train import TrainConfig, train
+
+
+class _Payload:
+    """Unpickling this runs ``os.mkdir(marker)``: what a crafted file would do with any command."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return os.mkdir, (self.marker,)
+
+
+@pytest.fixture
+def crafted(tmp_path):
+    marker = tmp_path / "pwned"
+    path = tmp_path / "crafted.pt"
+    torch.save({"model": _Payload(marker)}, path, pickle_protocol=pickle.DEFAULT_PROTOCOL)
+    return path, marker
+
+
+@pytest.fixture
+def truncated(tmp_path):
+    path = tmp_path / "truncated.pt"
+    path.write_bytes(infer.DEFAULT_WEIGHTS.read_bytes()[:5000])
+    return path
+
+
+def test_read_tensors_refuses_a_pickle_without_running_it(crafted, truncated):
+    path, marker = crafted
+    for bad in (path, truncated):
+        with pytest.raises(ValueError, match=rf"^checkpoint: {bad} is not a file of a training checkpoint \("):
+            infer.read_tensors(bad, "checkpoint", "a training checkpoint")
+    assert not marker.exists()
+    assert set(infer.read_tensors(infer.DEFAULT_WEIGHTS, "weights", "TPNET weights")) >= {"stage1.0.weight"}
+
+
+def test_train_checkpoint_and_init_are_read_as_tensors_only(data, crafted, truncated, tmp_path):  # noqa: F811
+    path, marker = crafted
+    config = TrainConfig(epochs=1, batch=2)
+    for bad in (path, truncated):
+        with pytest.raises(ValueError, match=r"^checkpoint: .* is not a file of a training checkpoint"):
+            train(data, tmp_path / "o.pt", config, checkpoint=bad, progress=False, log=lambda m: None)
+        with pytest.raises(ValueError, match=r"^init: .* is not a file of TPNET weights"):
+            train(data, tmp_path / "o.pt", TrainConfig(epochs=1, batch=2, init=str(bad)), progress=False,
+                  log=lambda m: None)
+    assert not marker.exists() and not (tmp_path / "o.pt").exists()
+
+
+def test_cli_weights_doors_say_one_line(crafted, truncated, tmp_path, capsys):
+    path, marker = crafted
+    for bad in (path, truncated):
+        assert main(["export", str(tmp_path / "n.onnx"), "--weights", str(bad)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"tpnet export: error: weights: {bad} is not a file of TPNET"), err
+        assert main(["demo", "--out", str(tmp_path / "d"), "--width", "64", "--height", "48", "--no-figures",
+                     "--weights", str(bad)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "weights: " in err[0] and str(bad) in err[0], err
+    assert not marker.exists() and not (tmp_path / "d").exists()
