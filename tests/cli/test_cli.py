@@ -42,6 +42,8 @@ def test_demo_writes_pictures_and_report(tmp_path, capsys):
     # run again: the demo refreshes its own output; a folder that also holds another file is refused, untouched
     argv = ["demo", "--out", str(tmp_path), "--width", "160", "--height", "128", "--no-figures"]
     assert main(argv) == 0 and json.loads((tmp_path / "report.json").read_text())["files"]
+    assert not (tmp_path / "comparison.png").exists()  # the earlier run's figures go: the folder is this run's
+    assert main(argv) == 0  # and again
     (tmp_path / "notes.txt").write_text("mine")
     before = sorted(p.name for p in tmp_path.iterdir())
     assert main(argv) == 2 and "holds files" in capsys.readouterr().err

@@ -47,7 +47,8 @@ def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int =
     from tpnet_gpu.scenes import Sensor, demo_scene, render
 
     # a demo's own earlier output is refreshed; a folder of other files needs ``overwrite``
-    overwrite = overwrite or demo_report.is_demo_output(out)
+    own = demo_report.is_demo_output(out)
+    overwrite = overwrite or own
     out = outputs.check(out, overwrite=overwrite)  # before the work, not after it
     rig = Rig(width=width, height=height)
     with Steps(rig.cams + 4, desc="demo", logger=log, progress=progress) as step:
@@ -76,7 +77,7 @@ def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int =
                  for name, est in (("tpnet", maps.disparity.astype(np.float64)),
                                    ("disparity engine (network input)", initial))}
         scene = f"demo-{seed}"
-        with outputs.output_folder(out, overwrite=overwrite) as folder:
+        with outputs.output_folder(out, overwrite=overwrite, keep_others=not own) as folder:
             written = frame_outputs.write(folder, maps, scene=scene, what=what, figures=figures)
             written += demo_report.write_truth(folder, maps, gt, initial, scene=scene, what=what, figures=figures)
             tiles = [int(np.ravel_multi_index((ty, tx), gt.shape)) for ty, tx in

@@ -41,9 +41,11 @@ def check(out, *, overwrite: bool, inputs: Iterable = (), option: str = "--out")
 
 
 @contextlib.contextmanager
-def output_folder(out, *, overwrite: bool, inputs: Iterable = (), option: str = "--out") -> Iterator[Path]:
+def output_folder(out, *, overwrite: bool, inputs: Iterable = (), option: str = "--out",
+                  keep_others: bool = True) -> Iterator[Path]:
     """Check ``out`` (``check``), yield a temporary folder to write into, and put it in place as ``out`` when the
-    block ends without an exception (else remove it and leave ``out`` as it was)."""
+    block ends without an exception (else remove it and leave ``out`` as it was). ``keep_others`` False: the old
+    folder's other files go too (a command refreshing its own earlier output, ``tpnet demo``)."""
     out = check(out, overwrite=overwrite, inputs=inputs, option=option)
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
@@ -52,10 +54,10 @@ def output_folder(out, *, overwrite: bool, inputs: Iterable = (), option: str = 
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    _put_in_place(staging, out)
+    _put_in_place(staging, out, keep_others)
 
 
-def _put_in_place(staging: Path, out: Path) -> None:
+def _put_in_place(staging: Path, out: Path, keep_others: bool = True) -> None:
     if not out.exists():
         os.replace(staging, out)
         return
@@ -63,7 +65,7 @@ def _put_in_place(staging: Path, out: Path) -> None:
     os.replace(out, old / "folder")
     os.replace(staging, out)
     kept = old / "folder"
-    for entry in kept.iterdir():  # the old files this output does not replace stay
+    for entry in kept.iterdir() if keep_others else ():  # the old files this output does not replace stay
         if not (out / entry.name).exists():
             os.replace(entry, out / entry.name)
     shutil.rmtree(old, ignore_errors=True)
