@@ -315,8 +315,14 @@ def disparity_range(min_disparity, max_disparity, rig, nearest_m: float) -> tupl
     """The range the disparity engine searches, px - its one home and default (``DisparityEngine``,
     ``Pipeline``, ``make_pipeline`` take ``min_disparity`` / ``max_disparity``): ``(min_disparity,
     max_disparity)`` checked (finite, max > min); None takes the default: 0 for the minimum, ``rig``'s
-    (a ``camera.Rig``) disparity at ``nearest_m`` metres (``EngineConfig.nearest_m``) for the maximum."""
+    (a ``camera.Rig``) disparity at ``nearest_m`` metres (``EngineConfig.nearest_m``) for the maximum, at most
+    the frame's bound. The bound: a disparity d moves camera k's tile window by d times its offset, so |d| beyond
+    the frame's side over the largest offset component leaves every window of that camera off the frame - a
+    range past it is refused naming the bound, before any work is sized by it."""
     min_disparity = 0.0 if min_disparity is None else min_disparity
+    offsets = np.abs(np.asarray(rig.offsets_array(), dtype=np.float64))
+    reach = min((side / span for side, span in ((rig.width, offsets[:, 0].max()), (rig.height, offsets[:, 1].max()))
+                 if span > 0), default=float("inf"))
     values = {"min_disparity": min_disparity, "max_disparity": max_disparity}
     for name, value in values.items():
         if value is None:
@@ -324,8 +330,11 @@ def disparity_range(min_disparity, max_disparity, rig, nearest_m: float) -> tupl
         if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
                 or not np.isfinite(value):
             raise ValueError(f"{name}: expected a finite number of pixels, got {value!r}")
+        if abs(value) > reach:
+            raise ValueError(f"{name}: expected at most {reach:g} px in magnitude (beyond it a camera's tile windows "
+                             f"leave the {rig.width}x{rig.height} frame), got {value:g}")
     low = float(min_disparity)
-    high = float(rig.disparity(nearest_m)) if max_disparity is None else float(max_disparity)
+    high = min(float(rig.disparity(nearest_m)), reach) if max_disparity is None else float(max_disparity)
     if high <= low:
         raise ValueError(f"max_disparity: expected more than min_disparity={low:g}, got {high:g}"
                          + (f" (the rig's disparity at {nearest_m:g} m)" if max_disparity is None else ""))
