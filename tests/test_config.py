@@ -8,14 +8,15 @@ from tpnet_gpu.config import EngineConfig, disparity_range
 
 
 def test_the_range_is_bound_by_the_frame():
-    # the quad's cameras sit +-0.5 baselines from its centre: a disparity beyond 2 x the side moves a window off
-    # the frame (2592 / 0.5 = 5184 px across, 1936 / 0.5 = 3872 px down: the smaller bound holds); a pair of 64 px
-    # (offsets 0 and 1 baseline) bounds its default at the width
-    assert disparity_range(0, 3872, Rig(), 8.0) == (0.0, 3872.0)
-    with pytest.raises(ValueError, match=r"max_disparity: expected at most 3872 px"):
-        disparity_range(0, 3873, Rig(), 8.0)
-    pair = Rig(width=64, height=48, offsets=((0.0, 0.0), (1.0, 0.0)))
-    assert pair.disparity(8.0) > 64 and disparity_range(None, None, pair, 8.0) == (0.0, 64.0)
+    # the quad's cameras spread one baseline across and one down: a disparity d moves two cameras' windows d px
+    # apart, so beyond the frame's side no tile has both on it (2592 across, 1936 down: the smaller bound holds);
+    # a pair of 64 px bounds its default at the width, referenced to its centre or to either camera alike
+    assert disparity_range(0, 1936, Rig(), 8.0) == (0.0, 1936.0)
+    with pytest.raises(ValueError, match=r"max_disparity: expected at most 1936 px"):
+        disparity_range(0, 1937, Rig(), 8.0)
+    for offsets in (((0.0, 0.0), (1.0, 0.0)), ((-0.5, 0.0), (0.5, 0.0)), ((-1.0, 0.0), (0.0, 0.0))):
+        pair = Rig(width=64, height=48, offsets=offsets)
+        assert pair.disparity(8.0) > 64 and disparity_range(None, None, pair, 8.0) == (0.0, 64.0)
 
 
 def test_the_default_range_ends_at_the_nearest_distance():
@@ -33,9 +34,9 @@ def test_the_default_range_ends_at_the_nearest_distance():
     ("1", 4.0, r"min_disparity: expected a finite number of pixels, got '1'"),
     (3.0, 1.0, r"max_disparity: expected more than min_disparity=3, got 1"),
     (100.0, None, r"max_disparity: expected more than min_disparity=100, got .* \(the rig's disparity at 8 m\)"),
-    (0.0, 1e308, r"max_disparity: expected at most 3872 px in magnitude \(beyond it a camera's tile windows leave the "
+    (0.0, 1e308, r"max_disparity: expected at most 1936 px in magnitude \(beyond it a camera's tile windows leave the "
                  r"2592x1936 frame\), got 1e\+308"),
-    (-4000.0, 4.0, r"min_disparity: expected at most 3872 px in magnitude"),
+    (-4000.0, 4.0, r"min_disparity: expected at most 1936 px in magnitude"),
 ])
 def test_bad_ranges_are_refused_naming_the_argument(low, high, match):
     with pytest.raises(ValueError, match=match):

@@ -151,7 +151,7 @@ def test_issue16_bad_weights_file_names_the_file(tmp_path):
     with pytest.raises(ValueError, match=rf"^weights: {bad} is not a file of TPNET weights \(UnpicklingError"):
         infer.load(bad)
     torch.save({"unrelated": torch.zeros(2)}, bad)
-    with pytest.raises(ValueError, match=rf"^weights: {bad} is not a file of TPNET weights \(RuntimeError"):
+    with pytest.raises(ValueError, match=rf"^weights: {bad} does not hold the expected state \(RuntimeError"):
         infer.load(bad)
 
 

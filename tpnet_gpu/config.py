@@ -316,13 +316,15 @@ def disparity_range(min_disparity, max_disparity, rig, nearest_m: float) -> tupl
     ``Pipeline``, ``make_pipeline`` take ``min_disparity`` / ``max_disparity``): ``(min_disparity,
     max_disparity)`` checked (finite, max > min); None takes the default: 0 for the minimum, ``rig``'s
     (a ``camera.Rig``) disparity at ``nearest_m`` metres (``EngineConfig.nearest_m``) for the maximum, at most
-    the frame's bound. The bound: a disparity d moves camera k's tile window by d times its offset, so |d| beyond
-    the frame's side over the largest offset component leaves every window of that camera off the frame - a
-    range past it is refused naming the bound, before any work is sized by it."""
+    the frame's bound. The bound: a disparity d moves two cameras' tile windows apart by d times their offsets'
+    difference, so |d| beyond the frame's side over the cameras' largest spread (per axis) leaves no tile with
+    both windows on the frame - a range past it is refused naming the bound, before any work is sized by it (the
+    same bound from whichever camera the rig is referenced to)."""
     min_disparity = 0.0 if min_disparity is None else min_disparity
-    offsets = np.abs(np.asarray(rig.offsets_array(), dtype=np.float64))
-    reach = min((side / span for side, span in ((rig.width, offsets[:, 0].max()), (rig.height, offsets[:, 1].max()))
-                 if span > 0), default=float("inf"))
+    offsets = np.asarray(rig.offsets_array(), dtype=np.float64)
+    spread = offsets.max(axis=0) - offsets.min(axis=0)  # (2,): x, y
+    reach = min((side / span for side, span in ((rig.width, spread[0]), (rig.height, spread[1])) if span > 0),
+                default=float("inf"))
     values = {"min_disparity": min_disparity, "max_disparity": max_disparity}
     for name, value in values.items():
         if value is None:

@@ -123,9 +123,11 @@ class DisparityEngine:
         if pairs is None:
             pairs = default_pairs(offsets)
         self.config = config
-        self.d_min, self.d_max = disparity_range(min_disparity, max_disparity, self.rig, config.nearest_m)
         self.tp = TileProcessor(height, width, camera_offsets=offsets, pairs=pairs, cfa=cfa,
                                 config=correlation_for(cfa), textures=textures, device=device, backend=backend)
+        # after the processor has checked the frame's size (the range's bound is made from it); before any
+        # work sized by the range (the cost volume, the sweeps)
+        self.d_min, self.d_max = disparity_range(min_disparity, max_disparity, self.rig, config.nearest_m)
         self.device = self.tp.torch_device
         self.grid = (self.tp.tiles_y, self.tp.tiles_x)
         self.sampler = AxisSampler(offsets, pairs, self.device)
