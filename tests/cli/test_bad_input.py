@@ -1,4 +1,5 @@
-"""Issue 16 regressions of the ``tpnet`` command line (each named after the failure the campaign found).
+"""Bad and hostile input at the ``tpnet`` command line: the regressions of issue 16's fuzz campaign and of issue
+40's hostile user (each named after the failure found).
 Oracle: the CLI's contract (cli.py docstring): bad input is one line ``tpnet CMD: error: ...`` and exit 2, found
 before any work; a bug of ours (a TypeError) keeps its traceback."""
 
@@ -61,3 +62,40 @@ def test_issue16_internal_type_error_keeps_its_traceback(monkeypatch, tmp_path):
     parser._subparsers._group_actions[0].choices["inspect"].set_defaults(func=buggy)
     with pytest.raises(TypeError, match="unsupported operand"):
         main(["inspect", str(tmp_path)])
+
+
+# --- issue 40: what a hostile user still broke ------------------------------------------------------------
+def _small_pair(folder, names=("left.png", "right.png")):
+    import numpy as np
+    from PIL import Image
+
+    rng = np.random.default_rng(1)
+    image = rng.integers(0, 256, (48, 72), dtype=np.uint8)
+    paths = [folder / name for name in names]
+    Image.fromarray(image[:, 4:68]).save(paths[0])
+    Image.fromarray(image[:, :64]).save(paths[1])  # the right view: the content 4 px to the left
+    return [str(p) for p in paths]
+
+
+def test_issue40_a_symlink_loop_as_input_is_one_line(tmp_path, capsys):
+    (tmp_path / "loop").symlink_to(tmp_path / "loop")  # before: Python's RuntimeError traceback
+    assert main(["process", str(tmp_path / "loop"), str(tmp_path / "loop"), "--max-disparity", "8", "--out",
+                 str(tmp_path / "o")]) == 2
+    assert "inputs: cannot resolve" in _one_line(capsys, "process") and not (tmp_path / "o").exists()
+
+
+def test_issue40_a_rig_file_nested_too_deep_is_one_line(tmp_path, capsys):
+    left, right = _small_pair(tmp_path)
+    deep = tmp_path / "deep.json"
+    deep.write_text("[" * 100_000 + "]" * 100_000)  # before: RecursionError
+    assert main(["process", left, right, "--rig", str(deep), "--max-disparity", "8", "--out",
+                 str(tmp_path / "o")]) == 2
+    assert "deep.json: nested too deep to be a rig file (JSON)" in _one_line(capsys, "process")
+
+
+def test_issue40_non_ascii_file_names_are_processed(tmp_path, capsys):
+    # before: processed in full, then refused by the point cloud's ASCII header ("'ascii' codec can't encode")
+    left, right = _small_pair(tmp_path, ("gauche é.png", "droite ü.png"))
+    assert main(["process", left, right, "--max-disparity", "8", "--out", str(tmp_path / "o"), "--no-figures"]) == 0
+    header = (tmp_path / "o" / "points.ply").read_bytes().split(b"end_header")[0].decode("ascii")
+    assert "gauche \\xe9.png" in header

@@ -176,6 +176,8 @@ def read_rig(path) -> Rig:
         raise RigFileError(f"{path}: not a text file ({exc})") from exc
     except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
         raise RigFileError(f"{path}: not valid {suffix[1:].upper()} ({exc})") from exc
+    except RecursionError as exc:  # nested deeper than the parser's recursion (a crafted file)
+        raise RigFileError(f"{path}: nested too deep to be a rig file ({suffix[1:].upper()})") from exc
     return rig_from_dict(data, str(path))
 
 

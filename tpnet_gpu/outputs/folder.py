@@ -26,11 +26,19 @@ def _inside(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
 
+def _resolve(path, option: str) -> Path:
+    """``path`` made absolute with its links followed, or a ``ValueError`` naming ``option`` (a link loop)."""
+    try:
+        return Path(path).resolve()
+    except (RuntimeError, OSError) as exc:  # Python raises RuntimeError for a symlink loop
+        raise ValueError(f"{option}: cannot resolve {path} ({exc})") from exc
+
+
 def check(out, *, overwrite: bool, inputs: Iterable = (), option: str = "--out") -> Path:
     """``out`` resolved, or a ``ValueError`` naming ``option`` when it may not be written (module docstring)."""
-    out = Path(out).resolve()
+    out = _resolve(out, option)
     for source in inputs:
-        source = Path(source).resolve()
+        source = _resolve(source, "inputs")
         if _inside(source, out) or _inside(out, source):
             raise ValueError(f"{option}: expected a folder apart from the inputs, got {out} (input {source})")
     if out.exists() and not out.is_dir():

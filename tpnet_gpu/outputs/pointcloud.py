@@ -107,6 +107,8 @@ def write_ply(path, points, colours=None, *, scalars: dict | None = None, commen
     for name, _, values in fields:
         record[name] = values
     ply_type = {"<f4": "float", "u1": "uchar"}
+    # PLY headers are ASCII: other characters of a comment (a file name) as Python escapes, never an error
+    comments = [str(c).replace("\n", " ").encode("ascii", "backslashreplace").decode("ascii") for c in comments]
     header = ["ply", "format binary_little_endian 1.0", *(f"comment {c}" for c in comments),
               f"element vertex {n}", *(f"property {ply_type[kind]} {name}" for name, kind, _ in fields),
               "end_header"]
