@@ -7,6 +7,7 @@ disparities go straight into the whole-frame form of the network; the result sta
 from __future__ import annotations
 
 import json
+import math
 import pickle
 from pathlib import Path
 
@@ -59,11 +60,42 @@ def _first_line(exc: BaseException) -> str:
 def recipe(path=None) -> dict:
     """The recipe (command, data set, seed, history) recorded beside the weights."""
     path = Path(path) if path is not None else DEFAULT_WEIGHTS
+    where = path.with_suffix(".json")
     try:
-        return json.loads(path.with_suffix(".json").read_text())
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"weights: the recipe {path.with_suffix('.json')} beside them is not valid JSON ({exc})") \
+        data = json.loads(where.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+        raise ValueError(f"weights: the recipe {where} beside them is not valid JSON ({type(exc).__name__})") \
             from None
+    _check_recipe(data, where)
+    return data
+
+
+def _check_recipe(data, where: Path) -> None:
+    """The fields the pipeline reads from a recipe, of the types it reads them as (a crafted or foreign ``.json``
+    beside weights is one ``ValueError`` naming the file and the field, not a traceback)."""
+    def bad(field: str, expected: str, got) -> ValueError:
+        return ValueError(f"weights: the recipe {where}: {field}: expected {expected}, got {str(got)[:80]}")
+
+    def number(v) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+    if not isinstance(data, dict):
+        raise bad("the file", "a JSON object", type(data).__name__)
+    lags_ = data.get("lags", [])
+    if not (isinstance(lags_, list) and lags_ and all(isinstance(v, list) and len(v) == 2 and all(map(number, v))
+                                                       for v in lags_)) and "lags" in data:
+        raise bad("lags", "a list of [x, y] pairs", lags_)
+    spec = data.get("dataset_spec", {})
+    if not isinstance(spec, dict):
+        raise bad("dataset_spec", "an object", spec)
+    weights = spec.get("colour_weights", [])
+    if weights is not None and not (isinstance(weights, list) and weights and all(map(number, weights))) \
+            and "colour_weights" in spec:
+        raise bad("dataset_spec.colour_weights", "a list of numbers", weights)
+    if "fat_zero" in spec and not number(spec["fat_zero"]):
+        raise bad("dataset_spec.fat_zero", "a finite number", spec["fat_zero"])
+    if data.get("on_request") is not None and not isinstance(data["on_request"], str):
+        raise bad("on_request", "a text", data["on_request"])
 
 
 def lags(path=None) -> tuple:

@@ -99,3 +99,14 @@ def test_issue40_non_ascii_file_names_are_processed(tmp_path, capsys):
     assert main(["process", left, right, "--max-disparity", "8", "--out", str(tmp_path / "o"), "--no-figures"]) == 0
     header = (tmp_path / "o" / "points.ply").read_bytes().split(b"end_header")[0].decode("ascii")
     assert "gauche \\xe9.png" in header
+
+
+def test_issue40_an_output_under_a_file_names_the_option(tmp_path, capsys):
+    # before: "[Errno 17] File exists", no option named
+    (tmp_path / "afile").write_text("x")
+    left, right = _small_pair(tmp_path)
+    assert main(["process", left, right, "--max-disparity", "8", "--out", str(tmp_path / "afile" / "o")]) == 2
+    err = _one_line(capsys, "process")
+    assert "--out: cannot write" in err and f"{tmp_path / 'afile'} is a file, not a folder" in err
+    assert main(["export", str(tmp_path / "afile" / "n.onnx")]) == 2
+    assert "is a file, not a folder" in _one_line(capsys, "export")

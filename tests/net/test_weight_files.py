@@ -73,3 +73,24 @@ def test_cli_weights_doors_say_one_line(crafted, truncated, tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "weights: " in err[0] and str(bad) in err[0], err
     assert not marker.exists() and not (tmp_path / "d").exists()
+
+
+@pytest.mark.parametrize("text, field", [
+    ("[1, 2]", "the file: expected a JSON object, got list"),
+    ('{"lags": 5}', "lags: expected a list of [x, y] pairs, got 5"),
+    ('{"lags": null}', "lags: expected a list of [x, y] pairs, got None"),
+    ('{"lags": [[1, "a"]]}', "lags: expected a list of [x, y] pairs"),
+    ('{"dataset_spec": [1]}', "dataset_spec: expected an object"),
+    ('{"dataset_spec": {"colour_weights": "x"}}', "dataset_spec.colour_weights: expected a list of numbers"),
+    ('{"dataset_spec": {"fat_zero": NaN}}', "dataset_spec.fat_zero: expected a finite number"),
+    ("[" * 100_000, "is not valid JSON"),
+])
+def test_a_crafted_recipe_beside_weights_is_one_line(tmp_path, capsys, text, field):
+    """The recipe (``.json``) beside weights is read for their lags, colours and fat zero: a file of the wrong
+    shape names itself and the field (issue 40: before, AttributeError / TypeError tracebacks)."""
+    weights = tmp_path / "w.pt"
+    weights.write_bytes(infer.DEFAULT_WEIGHTS.read_bytes())
+    weights.with_suffix(".json").write_text(text)
+    assert main(["export", str(tmp_path / "n.onnx"), "--weights", str(weights)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("tpnet export: error: weights: the recipe") and field in err[0], err

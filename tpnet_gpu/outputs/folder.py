@@ -34,9 +34,20 @@ def _resolve(path, option: str) -> Path:
         raise ValueError(f"{option}: cannot resolve {path} ({exc})") from exc
 
 
+def _parents_are_folders(path: Path, option: str) -> None:
+    """A ``ValueError`` naming ``option`` when an existing parent of ``path`` is a file (no folder can be made
+    there; the OS would say only "File exists")."""
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise ValueError(f"{option}: cannot write {path}: {parent} is a file, not a folder")
+            return
+
+
 def check(out, *, overwrite: bool, inputs: Iterable = (), option: str = "--out") -> Path:
     """``out`` resolved, or a ``ValueError`` naming ``option`` when it may not be written (module docstring)."""
     out = _resolve(out, option)
+    _parents_are_folders(out, option)
     for source in inputs:
         source = _resolve(source, "inputs")
         if _inside(source, out) or _inside(out, source):
@@ -84,7 +95,8 @@ def output_file(path, *, overwrite: bool, option: str = "--out") -> Iterator[Pat
     """Yield a temporary path beside the file ``path`` to write, renamed to ``path`` when the block ends without an
     exception (else removed); an existing ``path`` is refused without ``overwrite`` (a ``ValueError`` naming
     ``option``), before any work."""
-    path = Path(path).resolve()
+    path = _resolve(path, option)
+    _parents_are_folders(path, option)
     if path.is_dir():
         raise ValueError(f"{option}: expected a file, got the folder {path}")
     if path.exists() and not overwrite:
