@@ -62,3 +62,13 @@ def test_demo_weights_a_trained_file_and_one_for_another_rig(tmp_path, capsys, m
     monkeypatch.setattr("tpnet_gpu.scenes.render", render)
     assert main([*argv, "--out", str(tmp_path / "b"), "--weights", str(binocular)]) == 2
     assert capsys.readouterr().err.startswith("tpnet demo: error: weights:")
+
+
+def test_a_folder_with_a_crafted_report_is_not_the_demos(tmp_path, capsys):
+    """A ``report.json`` nested too deep, or naming no demo scene, makes the folder someone else's: refused in one
+    line without ``--overwrite``, untouched (not a RecursionError, not replaced)."""
+    for text in ("[" * 100_000, json.dumps({"scene": "mine", "files": ["report.json"]})):
+        (tmp_path / "report.json").write_text(text)
+        assert main(["demo", "--out", str(tmp_path), "--width", "64", "--height", "48", "--no-figures"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "holds files" in err and (tmp_path / "report.json").read_text() == text
