@@ -146,8 +146,13 @@ class DatasetSpec:
     # per camera a random gain, tone curve, blur and JPEG, 8 bits gamma-encoded (finish_raws) - what
     # `tpnet process LEFT.png RIGHT.png` reads
     photo: bool = False
+    # the probability that each random object is curved (a sphere or an upright cylinder, scenes.curved) instead
+    # of a plane: disparity that bends inside a tile and turns steep at outlines, as photographed objects do
+    curved: float = 0.0
 
     def __post_init__(self):
+        if not 0.0 <= self.curved <= 1.0:
+            raise ValueError(f"curved: expected a probability in [0, 1], got {self.curved!r}")
         colours = 1 if self.cfa is None else 3
         if len(self.colour_weights) != colours:
             raise ValueError(f"colour_weights: expected {colours} value(s) for cfa {self.cfa!r}, got "

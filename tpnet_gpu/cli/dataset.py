@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--photo: finishes mono frames as photographs; expected --mono with it")
     colour = {"cfa": None, "colour_weights": (1.0,), "photo": args.photo} if args.mono else {}
     spec = DatasetSpec(scenes=args.scenes, width=args.width, height=args.height, test_fraction=args.test_fraction,
-                       seed=args.seed, supersample=args.supersample, rig=rig, **colour)
+                       seed=args.seed, supersample=args.supersample, rig=rig, curved=args.curved, **colour)
     start = time.perf_counter()
     ray = options(args)
     folder = build(args.out, spec, device=args.device, chunks=None if ray is None else chunk_builder(ray))
@@ -57,6 +57,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
     data.add_argument("--photo", action="store_true",
                       help="with --mono: frames made like ordinary 8-bit photographs (a random lens per scene; per "
                            "camera a random gain, tone curve, blur and JPEG)")
+    data.add_argument("--curved", type=float, default=spec.curved, metavar="P",
+                      help="probability that each random object is a sphere or an upright cylinder instead of a "
+                           f"plane (curved and steep surfaces, as in photographs; default {spec.curved})")
     data.add_argument("--device", default=None, help=DEVICE_HELP)
     data.set_defaults(func=run)
     return data

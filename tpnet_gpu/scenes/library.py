@@ -7,6 +7,7 @@ import numpy as np
 
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.scenes import textures as tx
+from tpnet_gpu.scenes.curved import curved as curved_object
 from tpnet_gpu.scenes.objects import Scene, Sky, plane
 
 
@@ -55,9 +56,11 @@ def random_texture(rng: np.random.Generator, kind: str | None = None, n: int = 5
 
 
 def random_scene(rig: Rig, rng: np.random.Generator, *, objects: int | None = None,
-                 near_m: float = 8.0, far_m: float = 3000.0) -> Scene:
+                 near_m: float = 8.0, far_m: float = 3000.0, curved: float = 0.0) -> Scene:
     """A random scene: a far background (or sky) and ``objects`` patches at log-uniform distances in
-    [near_m, far_m], some slanted, some elliptic, with random textures and sizes."""
+    [near_m, far_m], some slanted, some elliptic, with random textures and sizes; each object is a sphere
+    or an upright cylinder (``scenes.curved``) instead with probability ``curved``. ``curved`` 0 draws
+    exactly the scenes it drew before curved objects existed (the data sets' seeds stay valid)."""
     count = int(rng.integers(3, 9)) if objects is None else objects
     items = []
     if rng.random() < 0.8:
@@ -65,6 +68,12 @@ def random_scene(rig: Rig, rng: np.random.Generator, *, objects: int | None = No
                            size_px=_size(rig, 4, rng.uniform(0.6, 1.2)), name="background"))
     for i in range(count):
         distance = float(np.exp(rng.uniform(np.log(near_m), np.log(far_m / 2))))
+        if curved > 0 and rng.random() < curved:
+            items.append(curved_object(
+                rig, distance, random_texture(rng), centre_px=_at(rig, rng.uniform(0.05, 0.95), rng.uniform(0.1, 0.95)),
+                size_px=_size(rig, rng.uniform(0.08, 0.5), rng.uniform(0.08, 0.5)),
+                kind=str(rng.choice(("sphere", "cylinder"))), gain=rng.uniform(0.5, 1.3), name=f"object {i}"))
+            continue
         slanted = rng.random() < 0.35
         items.append(plane(
             rig, distance, random_texture(rng),

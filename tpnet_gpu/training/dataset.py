@@ -71,7 +71,7 @@ def build_scene(index: int, spec: DatasetSpec, engine, processor, layers) -> dic
     (:func:`measurers` makes all three)."""
     rig = spec_rig(spec)
     rng = np.random.default_rng([spec.seed, index])
-    scene, seed = random_scene(rig, rng), int(rng.integers(2**31))
+    scene, seed = random_scene(rig, rng, curved=spec.curved), int(rng.integers(2**31))
     optics = Optics()
     if spec.photo:  # photographs are sharper or blurrier than the renderer's lens: one lens per scene
         from tpnet_gpu.scenes.image_pairs import PhotoFinish, finish_raws, photo_optics  # noqa: PLC0415
