@@ -77,16 +77,22 @@ def _init(text: str | None):
 
 
 def run(args: argparse.Namespace) -> int:
+    from tpnet_gpu.outputs import claimed  # noqa: PLC0415
+
+    paths = sequence(args.inputs)
+    init = _init(args.init)
+    with claimed(args.out, overwrite=args.overwrite, inputs=paths) as out:  # before the work, not after it
+        return _claimed(args, paths, init, out)
+
+
+def _claimed(args: argparse.Namespace, paths: list, init, out) -> int:
     import tifffile  # noqa: PLC0415 - the command's own imports on use (start-up)
 
     from tpnet_gpu.flow import FlowEstimator  # noqa: PLC0415
     from tpnet_gpu.io.images import save_png  # noqa: PLC0415
-    from tpnet_gpu.outputs import check, output_folder  # noqa: PLC0415
     from tpnet_gpu.io.stereo_io import load_frame  # noqa: PLC0415
+    from tpnet_gpu.outputs import output_folder  # noqa: PLC0415
 
-    paths = sequence(args.inputs)
-    init = _init(args.init)
-    out = check(args.out, overwrite=args.overwrite, inputs=paths)  # before the work, not after it
     frames = [load_frame(p, cfa=args.cfa, colour=args.colour) for p in paths]
     first = frames[0]
     for path, f in zip(paths[1:], frames[1:]):

@@ -29,14 +29,20 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _process(args: argparse.Namespace, step) -> int:
-    from tpnet_gpu.io.stereo_io import load_inputs, make_pipeline  # noqa: PLC0415 - torch and Warp on use
-    from tpnet_gpu.outputs import check, frame_outputs, output_folder  # noqa: PLC0415
+    from tpnet_gpu.outputs import claimed  # noqa: PLC0415
 
     max_d = pixels(args.max_disparity, "--max-disparity", positive=True)
     min_d = pixels(args.min_disparity, "--min-disparity", positive=False)
     if max_d is not None and min_d is not None and min_d >= max_d:
         raise ValueError(f"--min-disparity: expected less than --max-disparity {max_d:g}, got {min_d:g}")
-    out = check(args.out, overwrite=args.overwrite, inputs=args.inputs)  # before the work, not after it
+    with claimed(args.out, overwrite=args.overwrite, inputs=args.inputs) as out:  # before the work, not after it
+        return _claimed(args, step, out, min_d, max_d)
+
+
+def _claimed(args: argparse.Namespace, step, out: Path, min_d: float | None, max_d: float | None) -> int:
+    from tpnet_gpu.io.stereo_io import load_inputs, make_pipeline  # noqa: PLC0415 - torch and Warp on use
+    from tpnet_gpu.outputs import frame_outputs, output_folder  # noqa: PLC0415
+
     step("reading the inputs")
     inputs = load_inputs(args.inputs, rig=args.rig, cfa=args.cfa, colour=args.colour, reference=args.reference)
     if inputs.kind in ("pair", "images") and max_d is None:  # the library's rule, said with the option's name

@@ -12,19 +12,25 @@ RENDER_MIN_SIDE = 24  # the smallest multiple of 8 that rawio.LIBRAW_MIN_SIDE al
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np  # noqa: PLC0415
+    from tpnet_gpu.outputs import claimed  # noqa: PLC0415
 
-    from tpnet_gpu.camera import Rig  # noqa: PLC0415
-    from tpnet_gpu.outputs import check, output_folder  # noqa: PLC0415
-    from tpnet_gpu.runtime.progress import Steps  # noqa: PLC0415
-    from tpnet_gpu.scenes import Optics, Sensor, demo_scene, random_scene, render  # noqa: PLC0415
-    from tpnet_gpu.scenes.folder import save  # noqa: PLC0415
-
-    out = check(args.out, overwrite=args.overwrite, option="out")  # before the work, not after it
     for option, value in (("--width", args.width), ("--height", args.height)):
         if value % 8 or value < RENDER_MIN_SIDE:
             raise ValueError(f"{option}: expected a multiple of 8 that is at least {RENDER_MIN_SIDE} (LibRaw reads "
                              f"no smaller raw), got {value}")
+    with claimed(args.out, overwrite=args.overwrite, option="out") as out:  # before the work, not after it
+        return _claimed(args, out)
+
+
+def _claimed(args: argparse.Namespace, out) -> int:
+    import numpy as np  # noqa: PLC0415
+
+    from tpnet_gpu.camera import Rig  # noqa: PLC0415
+    from tpnet_gpu.outputs import output_folder  # noqa: PLC0415
+    from tpnet_gpu.runtime.progress import Steps  # noqa: PLC0415
+    from tpnet_gpu.scenes import Optics, Sensor, demo_scene, random_scene, render  # noqa: PLC0415
+    from tpnet_gpu.scenes.folder import save  # noqa: PLC0415
+
     rig = Rig(width=args.width, height=args.height)
     scene = demo_scene(rig, seed=args.seed) if args.scene == "demo" else random_scene(rig, np.random.default_rng(args.seed))
     optics = Optics()

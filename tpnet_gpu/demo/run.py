@@ -42,14 +42,20 @@ def run_demo(out="out/demo", *, width: int = 640, height: int = 480, seed: int =
     shipped ones), write the files and the report into ``out`` (whole or not at all; a folder holding anything
     but an earlier demo's output only with ``overwrite``: ``outputs``, ``demo_report.is_demo_output``); ``figures`` False: no matplotlib figures. Returns the report."""
     from tpnet_gpu.demo import report as demo_report  # noqa: PLC0415 - heavy imports on use
-    from tpnet_gpu.camera import Rig
-    from tpnet_gpu.pipeline import Pipeline
-    from tpnet_gpu.scenes import Sensor, demo_scene, render
 
     # a demo's own earlier output is refreshed; a folder of other files needs ``overwrite``
     own = demo_report.is_demo_output(out)
     overwrite = overwrite or own
-    out = outputs.check(out, overwrite=overwrite)  # before the work, not after it
+    with outputs.claimed(out, overwrite=overwrite) as out:  # before the work, not after it
+        return _claimed(out, width, height, seed, device, backend, weights, figures, overwrite, own, progress)
+
+
+def _claimed(out, width, height, seed, device, backend, weights, figures, overwrite, own, progress) -> dict:
+    from tpnet_gpu.demo import report as demo_report  # noqa: PLC0415 - heavy imports on use
+    from tpnet_gpu.camera import Rig
+    from tpnet_gpu.pipeline import Pipeline
+    from tpnet_gpu.scenes import Sensor, demo_scene, render
+
     rig = Rig(width=width, height=height)
     with Steps(rig.cams + 4, desc="demo", logger=log, progress=progress) as step:
         step("pipeline set-up")  # first: weights that do not fit are refused before the render

@@ -10,6 +10,11 @@ also leaves a ``.NAME.tmp-*`` folder beside it); a kill between the two renames 
 
 ``output_file(path, overwrite=...)`` does the same for one file: it yields a temporary path beside it to write,
 renamed to ``path`` only when the block ends without an exception.
+
+Both hold an exclusive claim on the output (``outputs.claim``) while they write; a command that works before it
+writes takes the claim before the work with ``claimed(out, ...)`` and writes inside it, so of two runs on one
+``--out`` without ``--overwrite`` one is refused at once, and ``--overwrite`` runs take turns. Folders and files
+are made with the permissions the umask gives (not the 0700 / 0600 of a private temporary).
 """
 
 from __future__ import annotations
@@ -20,6 +25,10 @@ import shutil
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
+
+from tpnet_gpu.outputs.claim import MARKER, claim, mark, umask
+
+_HELD: set = set()  # outputs this process holds the claim on (``claimed``)
 
 
 def _inside(path: Path, folder: Path) -> bool:
@@ -54,35 +63,77 @@ def check(out, *, overwrite: bool, inputs: Iterable = (), option: str = "--out")
             raise ValueError(f"{option}: expected a folder apart from the inputs, got {out} (input {source})")
     if out.exists() and not out.is_dir():
         raise ValueError(f"{option}: expected a folder, got the file {out}")
+    if out.is_dir() and os.path.ismount(out):  # it cannot be renamed aside, and its parent is another device's
+        raise ValueError(f"{option}: expected a folder that can be replaced, got the mount point {out} (write into "
+                         "a folder inside it)")
     if out.is_dir() and any(out.iterdir()) and not overwrite:
         raise ValueError(f"{option}: expected an empty or new folder (or --overwrite), got {out}, which holds files")
     return out
 
 
+def _make_parent(out: Path, option: str) -> Path | None:
+    """Make ``out``'s missing parents; return the topmost one made (None: it existed), to remove on failure."""
+    missing = [p for p in reversed(out.parents) if not p.exists()]
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"{option}: cannot make the folder {out.parent} ({exc.strerror or exc})") from exc
+    return missing[0] if missing else None
+
+
+@contextlib.contextmanager
+def claimed(out, *, overwrite: bool, inputs: Iterable = (), option: str = "--out") -> Iterator[Path]:
+    """Check ``out`` (``check``) and hold the exclusive claim on it for the block (``outputs.claim``: refused at
+    once without ``overwrite`` when another run holds it, else waiting its turn); yields ``out`` resolved. Parents
+    it makes are removed again when the block fails before anything is written there."""
+    out = check(out, overwrite=overwrite, inputs=inputs, option=option)
+    made = _make_parent(out, option)
+    try:
+        with claim(out, wait=overwrite, option=option):
+            check(out, overwrite=overwrite, inputs=inputs, option=option)  # the run before ours may have filled it
+            _HELD.add(out)
+            try:
+                yield out
+            finally:
+                _HELD.discard(out)
+    except BaseException:
+        if made is not None and not any(p.is_file() for p in made.rglob("*")):  # only the folders made here
+            shutil.rmtree(made, ignore_errors=True)
+        raise
+
+
 @contextlib.contextmanager
 def output_folder(out, *, overwrite: bool, inputs: Iterable = (), option: str = "--out",
                   keep_others: bool = True) -> Iterator[Path]:
-    """Check ``out`` (``check``), yield a temporary folder to write into, and put it in place as ``out`` when the
-    block ends without an exception (else remove it and leave ``out`` as it was). ``keep_others`` False: the old
-    folder's other files go too (a command refreshing its own earlier output, ``tpnet demo``)."""
-    out = check(out, overwrite=overwrite, inputs=inputs, option=option)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
-    try:
-        yield staging
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    _put_in_place(staging, out, keep_others)
+    """Check and claim ``out`` (``claimed``; already held by this process inside ``claimed``), yield a temporary
+    folder to write into, and put it in place as ``out`` when the block ends without an exception (else remove it
+    and leave ``out`` as it was). ``keep_others`` False: the old folder's other files go too (a command
+    refreshing its own earlier output, ``tpnet demo``)."""
+    resolved = _resolve(out, option)
+    held = contextlib.nullcontext(resolved) if resolved in _HELD else claimed(out, overwrite=overwrite,
+                                                                               inputs=inputs, option=option)
+    with held as out:
+        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+        try:
+            mark(staging, "staging")
+            os.chmod(staging, 0o777 & ~umask())
+            yield staging
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
+        _put_in_place(staging, out, keep_others)
 
 
 def _put_in_place(staging: Path, out: Path, keep_others: bool = True) -> None:
     if not out.exists():
         os.replace(staging, out)
+        (out / MARKER).unlink()
         return
     old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
+    mark(old, "old output")  # a run killed from here on leaves it for the next claim to put back
     os.replace(out, old / "folder")
     os.replace(staging, out)
+    (out / MARKER).unlink()
     kept = old / "folder"
     for entry in kept.iterdir() if keep_others else ():  # the old files this output does not replace stay
         if not (out / entry.name).exists():
@@ -90,24 +141,31 @@ def _put_in_place(staging: Path, out: Path, keep_others: bool = True) -> None:
     shutil.rmtree(old, ignore_errors=True)
 
 
-@contextlib.contextmanager
-def output_file(path, *, overwrite: bool, option: str = "--out") -> Iterator[Path]:
-    """Yield a temporary path beside the file ``path`` to write, renamed to ``path`` when the block ends without an
-    exception (else removed); an existing ``path`` is refused without ``overwrite`` (a ``ValueError`` naming
-    ``option``), before any work."""
-    path = _resolve(path, option)
-    _parents_are_folders(path, option)
+def _check_file(path: Path, *, overwrite: bool, option: str) -> None:
     if path.is_dir():
         raise ValueError(f"{option}: expected a file, got the folder {path}")
     if path.exists() and not overwrite:
         raise ValueError(f"{option}: expected a new file (or --overwrite), got {path}, which exists")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, name = tempfile.mkstemp(prefix=f".{path.name}.tmp-", suffix=path.suffix, dir=path.parent)
-    os.close(handle)
-    tmp = Path(name)
-    try:
-        yield tmp
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    os.replace(tmp, path)
+
+
+@contextlib.contextmanager
+def output_file(path, *, overwrite: bool, option: str = "--out") -> Iterator[Path]:
+    """Yield a temporary path beside the file ``path`` to write, renamed to ``path`` when the block ends without an
+    exception (else removed); an existing ``path`` is refused without ``overwrite`` (a ``ValueError`` naming
+    ``option``), before any work. The claim on ``path`` is held while it writes (module docstring)."""
+    path = _resolve(path, option)
+    _parents_are_folders(path, option)
+    _check_file(path, overwrite=overwrite, option=option)
+    _make_parent(path, option)
+    with claim(path, wait=overwrite, option=option):
+        _check_file(path, overwrite=overwrite, option=option)  # the run before ours may have written it
+        handle, name = tempfile.mkstemp(prefix=f".{path.name}.tmp-", suffix=path.suffix, dir=path.parent)
+        os.fchmod(handle, 0o666 & ~umask())
+        os.close(handle)
+        tmp = Path(name)
+        try:
+            yield tmp
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
+        os.replace(tmp, path)
