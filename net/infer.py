@@ -44,7 +44,12 @@ def read_tensors(path, option: str, what: str, map_location="cpu"):
 
 
 def load_state(module, state, path, option: str) -> None:
-    """``module.load_state_dict(state)``, a mismatch a ``ValueError`` naming ``option`` and the file."""
+    """``module.load_state_dict(state)``, a mismatch or a NaN / infinite number (it would make every disparity
+    NaN, silently) a ``ValueError`` naming ``option``, the file and the tensor."""
+    for name, value in state.items() if isinstance(state, dict) else ():
+        if torch.is_tensor(value) and value.is_floating_point() and not bool(torch.isfinite(value).all()):
+            raise ValueError(f"{option}: {path} holds NaN or infinite numbers (tensor {str(name)[:80]!r}): not usable "
+                             "weights")
     try:
         module.load_state_dict(state)
     except (RuntimeError, KeyError, TypeError, ValueError, AttributeError) as exc:

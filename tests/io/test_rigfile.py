@@ -151,6 +151,52 @@ def test_bad_files(tmp_path):
         rigfile.resolve("octagon")
 
 
+# issue 40 item 5: numbers no camera has. The oracle is the physics each one breaks, checked on a Rig built
+# without the file's bounds: depth or rays that are not finite.
+CRAFTED = [
+    ({"pixel_size_mm": 1e-320}, "pixel_size_mm: expected a value in [0.0001, 1]", "depth"),
+    ({"focal_mm": 1e308}, "focal_mm: expected a value in [0.1, 10000]", "depth"),
+    ({"extrinsics": [1e300] * 13}, "extrinsics[0]: expected a value in [-1, 1]", "views"),
+    ({"width": 10**6}, "width: expected a value in [1, 65535]", None),
+    ({"offsets": [[-0.5, 0.0], [1e200, 0.0]]}, "offsets[1][0]: expected a value in [-100, 100]", "views"),
+    ({"distortion": [0, 0, 0, 0, 0, 0, 1e30]}, "distortion[6]: expected a value in [-10, 10]", "views"),
+]
+
+
+@pytest.mark.parametrize("change, message, broken", CRAFTED, ids=[m.split(":")[0] for _, m, _ in CRAFTED])
+def test_numbers_no_camera_has_are_refused_naming_the_field(change, message, broken):
+    data = _with(**change)
+    with pytest.raises(RigFileError) as err:
+        rig_from_dict(data, "my.json")
+    assert str(err.value).startswith("my.json: ") and message in str(err.value) and "physical bounds" in str(err.value)
+    if broken is None:
+        return
+    fields = {k: (tuple(map(tuple, v)) if k == "offsets" else tuple(v) if isinstance(v, list) else v)
+              for k, v in data.items() if k not in ("format", "version", "description")}
+    raw = Rig(**fields)  # what the pipeline would have run with before the bounds
+    corners = np.array([[0.0, 0.0], [raw.width, raw.height]])
+    try:
+        with np.errstate(all="ignore"):
+            value = (raw.image_to_world(corners, np.full(2, 4.0)) if broken == "depth"
+                     else raw.port_coordinates(corners, np.full(2, float(raw.width))))
+    except ValueError as exc:  # the lens model itself gives up (distortion not invertible)
+        assert "distortion" in str(exc)
+        return
+    assert not np.isfinite(value).all() or np.abs(value).max() > 1e12  # the physics it would break
+
+
+def test_huge_integers_and_in_bound_combinations_are_refused(tmp_path):
+    (tmp_path / "digits.json").write_text('{"width": ' + "1" * 5000 + "}")
+    with pytest.raises(RigFileError, match=r"digits.json: not a rig file: JSON with Exceeds the limit"):
+        read_rig(tmp_path / "digits.json")
+    (tmp_path / "digits.toml").write_text("width = " + "1" * 5000 + "\n")
+    with pytest.raises(RigFileError, match=r"digits.toml: not a rig file: TOML with"):
+        read_rig(tmp_path / "digits.toml")
+    for bounds in ({"pixel_size_mm": 1.0, "focal_mm": 0.1}, {"pixel_size_mm": 1e-4, "focal_mm": 1e4}):
+        with pytest.raises(RigFileError, match="focal_mm / pixel_size_mm: expected a value in"):
+            rig_from_dict(_with(**bounds), "my.json")
+
+
 def test_writing_refuses_what_reading_would(tmp_path):
     with pytest.raises(RigFileError, match=r"rig: offsets\[0\]\[0\]: expected a finite number, got nan"):
         write_rig(Rig(offsets=((math.nan, 0.0), (0.5, 0.0))), tmp_path / "r.json")

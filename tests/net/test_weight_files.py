@@ -75,6 +75,32 @@ def test_cli_weights_doors_say_one_line(crafted, truncated, tmp_path, capsys):
     assert not marker.exists() and not (tmp_path / "d").exists()
 
 
+@pytest.fixture
+def nan_weights(tmp_path):
+    """The shipped weights with one NaN (and their recipe beside them): before, `demo` reported all-NaN
+    disparities and `export` wrote them to ONNX, exit 0."""
+    state = infer.read_tensors(infer.DEFAULT_WEIGHTS, "weights", "TPNET weights")
+    state["stage1.0.weight"][0, 0] = float("nan")
+    path = tmp_path / "nan.pt"
+    torch.save(state, path)
+    path.with_suffix(".json").write_bytes(infer.DEFAULT_WEIGHTS.with_suffix(".json").read_bytes())
+    return path
+
+
+def test_nan_weights_are_refused_at_every_door(nan_weights, data, tmp_path, capsys):  # noqa: F811
+    expected = f"weights: {nan_weights} holds NaN or infinite numbers (tensor 'stage1.0.weight')"
+    for args in (["export", str(tmp_path / "n.onnx"), "--weights", str(nan_weights)],
+                 ["demo", "--out", str(tmp_path / "d"), "--width", "64", "--height", "48", "--no-figures",
+                  "--weights", str(nan_weights)]):
+        assert main(args) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and expected in err[0], err
+    with pytest.raises(ValueError, match=r"^init: .* holds NaN or infinite numbers"):
+        train(data, tmp_path / "o.pt", TrainConfig(epochs=1, batch=2, init=str(nan_weights)), progress=False,
+              log=lambda m: None)
+    assert not (tmp_path / "n.onnx").exists() and not (tmp_path / "d").exists() and not (tmp_path / "o.pt").exists()
+
+
 @pytest.mark.parametrize("text, field", [
     ("[1, 2]", "the file: expected a JSON object, got list"),
     ('{"lags": 5}', "lags: expected a list of [x, y] pairs, got 5"),

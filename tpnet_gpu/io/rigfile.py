@@ -16,6 +16,8 @@ import numbers
 import tomllib
 from pathlib import Path
 
+import numpy as np
+
 from tpnet_gpu.camera import DISTORTION_TERMS, EXTRINSIC_TERMS, Rig
 
 FORMAT = "tpnet-gpu rig"
@@ -82,6 +84,47 @@ def _points(value, source: str, field: str, rows: int | None) -> tuple:
     return tuple(_vector(row, source, f"{field}[{i}]", 2, "numbers (x, y)") for i, row in enumerate(items))
 
 
+# Physical bounds (rig_file.md §3): a number outside them is not a camera, and some make depth, rays or the
+# search range non-finite (a 1e-320 mm pixel, a 1e308 mm lens, extrinsics of 1e300).
+BOUNDS = {
+    "width": (1, 65535), "height": (1, 65535),  # pixels
+    "pixel_size_mm": (1e-4, 1.0), "focal_mm": (0.1, 1e4), "baseline_mm": (1e-3, 1e6),
+    "distortion_radius_mm": (1e-3, 1e4), "focal_px": (10.0, 1e6),  # focal_mm / pixel_size_mm
+    "offsets": (-100.0, 100.0),  # baselines
+    "distortion": (-10.0, 10.0), "extrinsics": (-1.0, 1.0),  # radians and relative zooms: corrections, not poses
+    "rolls_deg": (-360.0, 360.0),
+}
+
+
+def _bounded(value, source: str, field: str, bound: str | None = None):
+    """``value`` (a number or nested tuples of them), or a ``RigFileError`` naming the first entry outside
+    ``BOUNDS[bound or field]``."""
+    low, high = BOUNDS[bound or field]
+    flat = np.ravel(np.asarray(value, dtype=np.float64))
+    bad = np.flatnonzero((flat < low) | (flat > high))
+    if bad.size:
+        index = "".join(f"[{int(i)}]" for i in np.unravel_index(bad[0], np.shape(value)))
+        raise _fail(source, f"{field}{index}", f"a value in [{low:g}, {high:g}] (physical bounds, rig_file.md §3)",
+                    value if np.ndim(value) == 0 else flat[bad[0]].item())
+    return value
+
+
+def _physical(rig: Rig, source: str) -> None:
+    """A ``RigFileError`` when the rig's geometry is not finite where the pipeline uses it: rays of the frame's
+    corners and centre, and the cameras' views of them from infinity to the largest disparity the frame holds."""
+    corners = np.array([[0.0, 0.0], [rig.width, 0.0], [0.0, rig.height], [rig.width, rig.height], rig.centre])
+    try:
+        with np.errstate(all="ignore"):
+            views = [rig.port_coordinates(corners, np.full(len(corners), d)) for d in (0.0, 1.0, float(rig.width))]
+            rays = rig.virtual_rays(corners)
+            depth = rig.image_to_world(corners, np.ones(len(corners)))
+    except ValueError as exc:  # the lens model's own refusal (a distortion it cannot invert over the frame)
+        raise RigFileError(f"{source}: {exc}") from exc
+    if not all(np.isfinite(v).all() for v in (*views, rays, depth)):
+        raise RigFileError(f"{source}: expected a rig whose rays and views are finite over the frame, got non-finite "
+                           "geometry (check pixel_size_mm, focal_mm, distortion, extrinsics, principal_points)")
+
+
 def rig_from_dict(data, source: str = "rig") -> Rig:
     """A ``Rig`` from a parsed rig file (rig_file.md §2, §3); ``source`` (e.g. the file name) starts messages.
 
@@ -102,27 +145,38 @@ def rig_from_dict(data, source: str = "rig") -> Rig:
         raise _fail(source, "version", f"an integer 1..{VERSION}", data["version"])
     if "description" in data and not isinstance(data["description"], str):
         raise _fail(source, "description", "a string", data["description"])
-    kw = {"width": _size(data["width"], source, "width"), "height": _size(data["height"], source, "height")}
+    kw = {name: _bounded(_size(data[name], source, name), source, name) for name in ("width", "height")}
     for name in ("pixel_size_mm", "focal_mm", "baseline_mm"):
-        kw[name] = _length(data[name], source, name)
-    kw["offsets"] = _points(data["offsets"], source, "offsets", None)
+        kw[name] = _bounded(_length(data[name], source, name), source, name)
+    _bounded(kw["focal_mm"] / kw["pixel_size_mm"], source, "focal_mm / pixel_size_mm", "focal_px")
+    kw["offsets"] = _bounded(_points(data["offsets"], source, "offsets", None), source, "offsets")
     cams = len(kw["offsets"])
     radius = data.get("distortion_radius_mm")
-    kw["distortion_radius_mm"] = (kw["width"] * kw["pixel_size_mm"] / 2.0 if radius is None
-                                  else _length(radius, source, "distortion_radius_mm"))
+    kw["distortion_radius_mm"] = (kw["width"] * kw["pixel_size_mm"] / 2.0 if radius is None else
+                                  _bounded(_length(radius, source, "distortion_radius_mm"), source,
+                                           "distortion_radius_mm"))
     terms = ((DISTORTION_TERMS, "distortion", "terms (C, B, A, A5, A6, A7, A8)"),
              (EXTRINSIC_TERMS, "extrinsics", "terms (tilt0..2, az0..2, roll0..3, zoom0..2)"))
     for count, name, what in terms:
         value = data.get(name)
-        kw[name] = (0.0,) * count if value is None else _vector(value, source, name, count, what)
+        kw[name] = (0.0,) * count if value is None else _bounded(_vector(value, source, name, count, what),
+                                                                  source, name)
     if data.get("principal_points") is not None:
-        kw["principal_points"] = _points(data["principal_points"], source, "principal_points", cams)
+        points = _points(data["principal_points"], source, "principal_points", cams)
+        for i, (x, y) in enumerate(points):  # on the sensor, give or take its own size
+            if not (-kw["width"] <= x <= 2 * kw["width"] and -kw["height"] <= y <= 2 * kw["height"]):
+                raise _fail(source, f"principal_points[{i}]", f"a point within a frame's size of the {kw['width']}x"
+                            f"{kw['height']} sensor (physical bounds, rig_file.md §3)", [x, y])
+        kw["principal_points"] = points
     if data.get("rolls_deg") is not None:
-        kw["rolls_deg"] = _vector(data["rolls_deg"], source, "rolls_deg", cams, "angles (degrees), one per camera")
+        kw["rolls_deg"] = _bounded(_vector(data["rolls_deg"], source, "rolls_deg", cams,
+                                           "angles (degrees), one per camera"), source, "rolls_deg")
     try:
-        return Rig(**kw)
+        rig = Rig(**kw)
     except ValueError as exc:  # Rig's own checks (none should remain after the ones above)
         raise RigFileError(f"{source}: {exc}") from exc
+    _physical(rig, source)
+    return rig
 
 
 def _fields(rig: Rig) -> dict:
@@ -178,6 +232,8 @@ def read_rig(path) -> Rig:
         raise RigFileError(f"{path}: not valid {suffix[1:].upper()} ({exc})") from exc
     except RecursionError as exc:  # nested deeper than the parser's recursion (a crafted file)
         raise RigFileError(f"{path}: nested too deep to be a rig file ({suffix[1:].upper()})") from exc
+    except ValueError as exc:  # the parsers' other refusals, e.g. an integer of more than 4300 digits
+        raise RigFileError(f"{path}: not a rig file: {suffix[1:].upper()} with {exc}") from exc
     return rig_from_dict(data, str(path))
 
 
