@@ -238,7 +238,9 @@ class EngineConfig:
     on rendered tuning scenes. A rig whose pairs lie along quad pairs (a binocular rig: the quad's pair 0) takes
     "lma" with the other quad pairs masked off (``disparity.measure.lma_slots``); other rigs always use "axis". A
     refined tile that ends more than ``leash`` px from a first-stage answer whose margin is >= ``leash_margin``
-    keeps the first stage's answer."""
+    keeps the first stage's answer. ``memory_limit_gb``: the budget of the engine's range-sized buffers (its cost
+    volumes, ``DisparityEngine.search_bytes``), GB; None: ``runtime.memory.DEFAULT_SHARE`` of the memory
+    available when it is made. A range and frame that need more are refused before anything is allocated."""
 
     nearest_m: float = 8.0
     reach: float = 6.0
@@ -254,8 +256,13 @@ class EngineConfig:
     verify_strength: float = 0.1
     leash: float = 1.0
     leash_margin: float = 0.5
+    memory_limit_gb: float | None = None
 
     def __post_init__(self):
+        limit = self.memory_limit_gb
+        if limit is not None and (isinstance(limit, bool) or not isinstance(limit, (int, float))
+                                  or not np.isfinite(limit) or limit <= 0):
+            raise ValueError(f"memory_limit_gb: expected a finite number of GB > 0 or None, got {limit!r}")
         if self.measure not in MEASURES:
             raise ValueError(f"EngineConfig.measure: expected one of {MEASURES}, got {self.measure!r}")
         for name in ("reach", "bin_step", "nearest_m", "tolerance", "trust", "leash"):

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.config import PipelineConfig, TextureConfig
+from tpnet_gpu.config import PipelineConfig, TextureConfig, disparity_range
 from tpnet_gpu.disparity.checks import CROSS_CHECK_PX, cross_camera, cross_difference, windows_inside
 from tpnet_gpu.disparity.engine import DisparityEngine
 from tpnet_gpu.disparity.grid import grow
@@ -36,6 +36,10 @@ from tpnet_gpu.net.neighbours import CLUSTER_RADIUS
 from tpnet_gpu.processor import TileProcessor
 
 log = logging.getLogger(__name__)
+# the pipeline's memory besides the engines' cost volumes, per frame pixel: peak RSS of `tpnet process` on a
+# 4000x3000 mono pair searched to 16 px (volumes 0.2 GB) was 3.16 GB, 2-core Xeon, 2026-12-07 - frames, tile
+# processors, textures, per-pixel maps, torch and Python
+FRAME_BYTES_PER_PIXEL = 250.0
 
 
 @dataclass(frozen=True)
@@ -111,6 +115,7 @@ class Pipeline:
                  device: str | None = None, config: PipelineConfig = PipelineConfig(), backend: str | None = None):
         engine_config = config.engine
         self.config = config
+        self._check_memory(height, width, rig, min_disparity, max_disparity, device)
         self.engine = DisparityEngine(height, width, rig=rig, pairs=pairs, cfa=cfa, min_disparity=min_disparity,
                                       max_disparity=max_disparity, config=engine_config,
                                       device=device, backend=backend, textures=config.textures)
@@ -138,6 +143,22 @@ class Pipeline:
             self._infer = infer.infer  # an attribute, so the pipeline bench can time the network's share
         log.info("pipeline %dx%d on %s: %d cameras, disparity %g .. %g px, weights %s", width, height, self.device,
                  self.engine.rig.cams, self.engine.d_min, self.engine.d_max, self.weights)
+
+    def _check_memory(self, height, width, rig, min_disparity, max_disparity, device) -> None:
+        """Refuse a frame and range whose engines (the cross-check's too) need more than the budget, before either
+        is made (``DisparityEngine.check_memory``; the range's own checks come first)."""
+        cfg = self.config
+        try:
+            view = rig if isinstance(rig, Rig) else Rig(width=width, height=height)
+            d_min, d_max = disparity_range(min_disparity, max_disparity, view, cfg.engine.nearest_m)
+        except (ValueError, TypeError):
+            return  # the engine refuses the frame, the rig or the range, in its own order, naming them
+        if (view.width, view.height) != (width, height):
+            return
+        engines = 2 if cfg.cross_check or (cfg.cross_check is None and view.cams == 2) else 1
+        where = device or ("cuda" if torch.cuda.is_available() else "cpu")
+        DisparityEngine.check_memory(height, width, d_min, d_max, cfg.engine, where, engines,
+                                     frame_bytes=FRAME_BYTES_PER_PIXEL * height * width)
 
     def _checks(self, height, width, cfa, pairs, engine_config, device, backend) -> None:
         """The cross-check's engine (``PipelineConfig.cross_check``) and the per-pixel step's cameras."""

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import inspect
 import math
@@ -34,6 +35,17 @@ def pixels(text: str | None, option: str, *, positive: bool) -> float | None:
         value = math.nan
     if not math.isfinite(value) or (positive and value <= 0):
         raise ValueError(f"{option}: expected a {'positive ' if positive else ''}number of pixels, got {text!r}")
+    return value
+
+
+def positive_gb(text: str) -> float:
+    """An argparse type: a finite number of GB > 0 (argparse says which option and what came)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a finite number of GB > 0, got {text!r}")
     return value
 
 

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from tpnet_gpu.cli.common import BACKEND_HELP, DEVICE_HELP, NO_FIGURES_HELP, OVERWRITE_HELP, WEIGHTS_HELP, \
-    default, one_shot_threads, pixels
+    default, one_shot_threads, pixels, positive_gb
 from tpnet_gpu.io import stereo_io  # light: the images are read on use
 
 # the library's defaults of the options that set how the inputs are read (one default per setting)
@@ -56,7 +56,7 @@ def _claimed(args: argparse.Namespace, step, out: Path, min_d: float | None, max
                                  device=args.device, backend=args.backend, two_surface=args.two_surface,
                                  cross_check=False if args.no_checks else None, min_confidence=args.min_confidence,
                                  keep_fraction=args.keep_fraction, per_pixel=True if args.per_pixel else None,
-                                 method=args.method)
+                                 method=args.method, memory_limit_gb=args.memory_limit)
         step("frame")
         result = pipeline.process(frames.frames)
     seconds = time.perf_counter() - start
@@ -119,6 +119,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
                       help="keep only the F (0..1] most confident answers (default 1)")
     proc.add_argument("--no-checks", action="store_true", help="answer every tile: no cross-check of a stereo "
                       "pair and no off-image check (docs/outputs.md §1.3)")
+    proc.add_argument("--memory-limit", type=positive_gb, default=None, metavar="GB",
+                      help="the budget of the search's range-sized buffers; a frame and range that need more are "
+                           "refused before the work (default: 80 %% of the memory available at the start)")
     proc.add_argument("--per-pixel", action="store_true",
                       help="also depth_px.tif and points_px.ply, one value per pixel (mono stereo pairs)")
     proc.set_defaults(func=run)

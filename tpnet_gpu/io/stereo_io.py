@@ -282,18 +282,21 @@ def load_inputs(paths, *, rig=None, cfa: str | None = None, colour: str = "luma"
 
 
 def make_pipeline(inputs: Inputs, *, min_disparity: float | None = None, max_disparity: float | None = None, weights=None,
-                  device: str | None = None, backend: str | None = None, two_surface: bool = False, **answers):
+                  device: str | None = None, backend: str | None = None, two_surface: bool = False,
+                  memory_limit_gb: float | None = None, **answers):
     """The pipeline for ``inputs`` (``load_inputs``: their padded size, colours and fitted rig; any camera count).
     ``min_disparity`` None: the engine's default (0); ``max_disparity`` None: the engine's default from the rig - for a scene or raw files, whose rig is a real
     one; ordinary images (a pair, a rig's images) need it (``ValueError``: their rig's focal length and
     baseline are not known). ``weights`` None: the shipped ones for the rig (``Pipeline``); ``two_surface``:
-    also both surfaces of two-surface tiles; ``answers``: ``PipelineConfig``'s ``cross_check``,
-    ``min_confidence``, ``keep_fraction``, ``per_pixel``, ``method``."""
+    also both surfaces of two-surface tiles; ``memory_limit_gb``: ``EngineConfig``'s (None: a share of the memory
+    available); ``answers``: ``PipelineConfig``'s ``cross_check``, ``min_confidence``, ``keep_fraction``,
+    ``per_pixel``, ``method``."""
+    from tpnet_gpu.config import EngineConfig  # noqa: PLC0415
     from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415 - torch, Warp and the model on use
 
     if inputs.kind in ("pair", "images") and max_disparity is None:
         raise ValueError("max_disparity: required for ordinary images (the largest disparity searched, px)")
-    config = PipelineConfig(two_surface=two_surface, **answers)
+    config = PipelineConfig(engine=EngineConfig(memory_limit_gb=memory_limit_gb), two_surface=two_surface, **answers)
     height, width = inputs.frames.padded
     return Pipeline(height, width, cfa=inputs.frames.cfa, rig=inputs.rig, min_disparity=min_disparity,
                     max_disparity=max_disparity, weights=weights, device=device, backend=backend, config=config)
