@@ -239,7 +239,7 @@ class EngineConfig:
     "lma" with the other quad pairs masked off (``disparity.measure.lma_slots``); other rigs always use "axis". A
     refined tile that ends more than ``leash`` px from a first-stage answer whose margin is >= ``leash_margin``
     keeps the first stage's answer. ``memory_limit_gb``: the budget of the engine's range-sized buffers (its cost
-    volumes, ``DisparityEngine.search_bytes``), GB; None: ``runtime.memory.DEFAULT_SHARE`` of the memory
+    volumes, ``disparity.budget``), GB; None: ``runtime.memory.DEFAULT_SHARE`` of the memory
     available when it is made. A range and frame that need more are refused before anything is allocated."""
 
     nearest_m: float = 8.0

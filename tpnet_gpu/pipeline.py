@@ -23,6 +23,7 @@ import torch
 
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import PipelineConfig, TextureConfig, disparity_range
+from tpnet_gpu.disparity import budget
 from tpnet_gpu.disparity.checks import CROSS_CHECK_PX, cross_camera, cross_difference, windows_inside
 from tpnet_gpu.disparity.engine import DisparityEngine
 from tpnet_gpu.disparity.grid import grow
@@ -146,7 +147,7 @@ class Pipeline:
 
     def _check_memory(self, height, width, rig, min_disparity, max_disparity, device) -> None:
         """Refuse a frame and range whose engines (the cross-check's too) need more than the budget, before either
-        is made (``DisparityEngine.check_memory``; the range's own checks come first)."""
+        is made (``disparity.budget``; the range's own checks come first)."""
         cfg = self.config
         try:
             view = rig if isinstance(rig, Rig) else Rig(width=width, height=height)
@@ -157,8 +158,8 @@ class Pipeline:
             return
         engines = 2 if cfg.cross_check or (cfg.cross_check is None and view.cams == 2) else 1
         where = device or ("cuda" if torch.cuda.is_available() else "cpu")
-        DisparityEngine.check_memory(height, width, d_min, d_max, cfg.engine, where, engines,
-                                     frame_bytes=FRAME_BYTES_PER_PIXEL * height * width)
+        budget.check(height, width, d_min, d_max, cfg.engine, where, engines,
+                     frame_bytes=FRAME_BYTES_PER_PIXEL * height * width)
 
     def _checks(self, height, width, cfa, pairs, engine_config, device, backend) -> None:
         """The cross-check's engine (``PipelineConfig.cross_check``) and the per-pixel step's cameras."""

@@ -1,5 +1,5 @@
-"""The memory budget (``runtime.memory``) and the search's estimate (``DisparityEngine.search_bytes``). Oracles:
-the bytes of the tensors an engine really holds for its range (``Tensor.nbytes``), and the budget arithmetic on
+"""The memory budget (``runtime.memory``) and the search's estimate (``disparity.budget.search_bytes``).
+Oracles: the bytes of the tensors an engine really holds for its range (``Tensor.nbytes``), and the budget arithmetic on
 a stated amount of available memory. A refusal must come before anything range-sized exists (timed < 10 s)."""
 
 import time
@@ -8,6 +8,7 @@ import pytest
 
 from tpnet_gpu.cli import main
 from tpnet_gpu.config import EngineConfig, PipelineConfig
+from tpnet_gpu.disparity import budget
 from tpnet_gpu.disparity.engine import DisparityEngine
 from tpnet_gpu.io import rigfile
 from tpnet_gpu.pipeline import Pipeline
@@ -17,7 +18,7 @@ from tpnet_gpu.runtime import memory
 def test_the_estimate_is_the_bytes_the_engine_holds_for_its_range():
     engine = DisparityEngine(96, 128, cfa=None, max_disparity=20.0, device="cpu")
     held = sum(t.nbytes for v in (engine.volume, engine.sparse_volume) for t in (v.values, v._cost, v._total))
-    assert DisparityEngine.search_bytes(96, 128, engine.d_min, engine.d_max, engine.config) == held
+    assert budget.search_bytes(96, 128, engine.d_min, engine.d_max, engine.config) == held
 
 
 def test_budget_is_the_limit_given_or_a_share_of_what_is_available(monkeypatch):
@@ -47,7 +48,8 @@ def test_a_range_too_wide_for_the_budget_is_refused_before_any_work():
     config = PipelineConfig(engine=EngineConfig(memory_limit_gb=4.0))
     start = time.perf_counter()
     with pytest.raises(ValueError, match=r"memory_limit_gb: searching 0..2000 px .* over the 4000x3000 frame "
-                                         r"\(2 engines: the cross-check's too\) with the frame's own buffers needs about 25.7 GB"):
+                                         r"\(2 engines: the cross-check's too\) with the frame's own buffers "
+                                         r"needs about 25.7 GB"):
         Pipeline(3000, 4000, rig=big, cfa=None, max_disparity=2000.0, device="cpu", config=config)
     assert time.perf_counter() - start < 10.0
     with pytest.raises(ValueError, match="memory_limit_gb: expected a finite number of GB > 0"):
@@ -66,8 +68,10 @@ def test_cli_memory_limit_is_one_line(tmp_path, capsys):
             str(tmp_path / "o"), "--no-figures"]
     assert main([*args, "--memory-limit", "1e-6"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "memory_limit_gb: searching 0..30 px" in err[0] and "--memory-limit GB" in err[0], err
+    assert len(err) == 1 and "memory_limit_gb: searching 0..30 px" in err[0], err
+    assert "--memory-limit GB" in err[0]
     with pytest.raises(SystemExit) as done:  # argparse's own refusal of an option value
         main([*args, "--memory-limit", "inf"])
-    assert done.value.code == 2 and "argument --memory-limit: expected a finite number of GB > 0, got 'inf'" in capsys.readouterr().err
+    assert done.value.code == 2
+    assert "argument --memory-limit: expected a finite number of GB > 0, got 'inf'" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()

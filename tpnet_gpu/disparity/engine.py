@@ -22,20 +22,19 @@ import torch
 
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig, disparity_range
+from tpnet_gpu.disparity import budget
 from tpnet_gpu.disparity.grid import fill, neighbourhood, ring_median, settle, two_depth
 from tpnet_gpu.disparity.measure import CHUNK, Measurer, row_chunks
 from tpnet_gpu.disparity.occlusion import Occlusion, lowest
 from tpnet_gpu.disparity.pairs import AxisSampler, combine_pairs, default_pairs
 from tpnet_gpu.disparity.results import DisparityResult, FirstMeasure
 from tpnet_gpu.disparity.volume import CostVolume
-from tpnet_gpu.layout import TILE_STRIDE
 from tpnet_gpu.processor import TileProcessor, validate
-from tpnet_gpu.runtime import memory
 
 # First stage: every SPARSE-th tile in each direction sweeps the whole range at full resolution. (Binned frames
 # were cheaper but alias fine periodic textures into false matches the local pass cannot leave: 24 rendered
 # tuning scenes, flat tiles gross 4.7 % binned vs 1.1 % sparse; on a checkerboard wall 1039 of 3095 vs 26.)
-SPARSE = 2
+SPARSE = budget.SPARSE
 # Frames are scaled to this mean level before correlating, so the fat zero and the strength thresholds (set for
 # 12-bit raw data: rendered scenes have means of 1200-1800) are relative to the signal, for any bit depth.
 REFERENCE_LEVEL = 1500.0
@@ -131,7 +130,7 @@ class DisparityEngine:
         # work sized by the range (the cost volume, the sweeps)
         self.d_min, self.d_max = disparity_range(min_disparity, max_disparity, self.rig, config.nearest_m)
         self.device = self.tp.torch_device
-        self.check_memory(height, width, self.d_min, self.d_max, config, str(self.device))
+        budget.check(height, width, self.d_min, self.d_max, config, str(self.device))
         self.grid = (self.tp.tiles_y, self.tp.tiles_x)
         self.sampler = AxisSampler(offsets, pairs, self.device)
         self.offsets = torch.arange(-7.0, 7.0 + 1e-6, OFFSETS_STEP, device=self.device)
@@ -164,27 +163,6 @@ class DisparityEngine:
                                    self.device)
         self.unhidden_offsets = torch.arange(-UNHIDDEN_READ, UNHIDDEN_READ + 1e-6, OFFSETS_STEP, device=self.device)
         self.unhidden_grid = self.sampler.uniform(self.unhidden_offsets, CHUNK)  # its lags, made once
-
-    @staticmethod
-    def search_bytes(height: int, width: int, d_min: float, d_max: float, config: EngineConfig) -> float:
-        """Bytes of an engine's range-sized buffers for a ``height`` x ``width`` frame searched over
-        ``[d_min, d_max]``: its two cost volumes (every tile, and the sparse grid), three float32 arrays each."""
-        tiles_y, tiles_x = height // TILE_STRIDE, width // TILE_STRIDE
-        sparse = ((tiles_y + SPARSE - 1) // SPARSE) * ((tiles_x + SPARSE - 1) // SPARSE)
-        bins = round((d_max - d_min + 2 * config.reach) / config.bin_step) + 1
-        return 3 * 4.0 * bins * (tiles_y * tiles_x + sparse)
-
-    @classmethod
-    def check_memory(cls, height: int, width: int, d_min: float, d_max: float, config: EngineConfig, device: str,
-                     engines: int = 1, frame_bytes: float = 0.0) -> None:
-        """A ``ValueError`` naming ``memory_limit_gb`` when ``engines`` engines of this frame and range (and
-        ``frame_bytes`` of the caller's own) need more than ``config.memory_limit_gb`` (``runtime.memory.check``)
-        - before anything of that size exists."""
-        need = engines * cls.search_bytes(height, width, d_min, d_max, config) + frame_bytes
-        what = (f"searching {d_min:g}..{d_max:g} px (min_disparity..max_disparity) over the {width}x{height} frame"
-                + (f" ({engines} engines: the cross-check's too)" if engines > 1 else "")
-                + (" with the frame's own buffers" if frame_bytes else ""))
-        memory.check(need, config.memory_limit_gb, device, what)
 
     # --- first stage ---------------------------------------------------------------------------------------
     def _sweep(self, tp: TileProcessor, targets, volume: CostVolume, active=None) -> None:

@@ -6,5 +6,5 @@ from tpnet_gpu.scenes.library import demo_scene, random_scene
 from tpnet_gpu.scenes.objects import Patch, Scene, Sky, plane
 from tpnet_gpu.scenes.render import Optics, Rendered, Sensor, render
 
-__all__ = ["Cylinder", "Optics", "Patch", "Rendered", "Scene", "Sensor", "Sky", "Sphere", "curved", "demo_scene", "plane",
-           "random_scene", "render"]
+__all__ = ["Cylinder", "Optics", "Patch", "Rendered", "Scene", "Sensor", "Sky", "Sphere", "curved", "demo_scene",
+           "plane", "random_scene", "render"]
