@@ -11,6 +11,9 @@ run the result). The file is written whole or not at all (``tpnet_gpu.outputs.ou
 
 from __future__ import annotations
 
+import contextlib
+import logging
+import warnings
 from pathlib import Path
 
 import torch
@@ -52,14 +55,33 @@ class FrameNetwork(nn.Module):
         return target + frame_residual(layers, target, stage1, stage2, clone=0, steps=False)  # symbolic tile counts
 
 
-def _onnx_modules():
-    """Import the exporter's dependencies or say which extra brings them."""
+def _onnx_modules() -> int:
+    """Import the exporter's dependencies or say which extra brings them; the highest opset the installed onnx
+    knows (the version converter's limit)."""
     try:
-        import onnx  # noqa: F401, PLC0415 - the dynamo exporter writes through them
+        import onnx  # noqa: PLC0415 - the dynamo exporter writes through them
         import onnxscript  # noqa: F401, PLC0415
     except ModuleNotFoundError as exc:
         raise ModuleNotFoundError(f"ONNX export needs the '{exc.name}' package: pip install 'tpnet-gpu[onnx]'",
                                   name=exc.name) from exc
+    return int(onnx.defs.onnx_opset_version())
+
+
+@contextlib.contextmanager
+def _quiet_exporter():
+    """The exporter's warnings and log lines (torchvision ops it skips, axis names it merges) off the user's
+    terminal: they are about torch's internals, not the file written."""
+    loggers = [logging.getLogger(name) for name in ("torch.onnx", "torch.export", "onnxscript")]
+    levels = [lg.level for lg in loggers]
+    try:
+        for lg in loggers:
+            lg.setLevel(logging.ERROR)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            yield
+    finally:
+        for lg, level in zip(loggers, levels):
+            lg.setLevel(level)
 
 
 def export_onnx(model: TPNet, path, *, overwrite: bool = False, opset: int = OPSET) -> Path:
@@ -87,15 +109,21 @@ def export_onnx(model: TPNet, path, *, overwrite: bool = False, opset: int = OPS
     if Path(path).suffix != ".onnx":
         raise ValueError(f"path: expected a file name ending in .onnx, got {str(path)!r}")
     wrapper = FrameNetwork(model)  # checks the model before any work
-    _onnx_modules()
+    highest = _onnx_modules()
+    if opset > highest:  # the exporter would fall back to 18 with a traceback and say nothing
+        raise ValueError(f"opset: expected an int in {OPSET}..{highest} (the installed onnx knows no later one), "
+                         f"got {opset}")
     net = wrapper.to("cpu", torch.float32).eval()
     g = model.layers
     example = (torch.zeros(*EXAMPLE_GRID, g, CORR_SIZE, CORR_SIZE), torch.zeros(EXAMPLE_GRID))
     ty, tx = torch.export.Dim("tiles_y", min=2), torch.export.Dim("tiles_x", min=2)
-    with output_file(path, overwrite=overwrite, option="path") as tmp, torch.no_grad():
+    with output_file(path, overwrite=overwrite, option="path") as tmp, torch.no_grad(), _quiet_exporter():
         program = torch.onnx.export(net, example, dynamo=True, opset_version=opset, input_names=list(INPUTS),
                                     output_names=list(OUTPUTS), dynamic_shapes={"layers": {0: ty, 1: tx},
                                                                                  "target": {0: ty, 1: tx}},
                                     optimize=True, verbose=False)
+        written = {i.domain: i.version for i in program.model_proto.opset_import}
+        if written.get("", written.get("ai.onnx")) != opset:  # nothing is put in place
+            raise ValueError(f"opset: the exporter could not write opset {opset} (it made {written}); try {OPSET}")
         program.save(str(tmp), external_data=False)  # one self-contained file (the weights are ~1.4 MB)
     return Path(path).resolve()

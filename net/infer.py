@@ -14,6 +14,7 @@ from pathlib import Path
 import torch
 
 from tpnet_gpu.config import CorrelationConfig, DatasetSpec
+from tpnet_gpu.io.paths import regular_file
 from tpnet_gpu.net.layers import QUAD_LAGS, lags_match
 from tpnet_gpu.net.model import TPNet
 
@@ -35,7 +36,9 @@ def load(path=None, device=None) -> TPNet:
 def read_tensors(path, option: str, what: str, map_location="cpu"):
     """The tensors, numbers, strings, lists and dicts saved at ``path`` by ``torch.save`` - never unpickling
     anything else (``weights_only=True``: a crafted file cannot run code) - or a ``ValueError`` naming ``option``
-    and the file (a truncated, crafted or foreign file), one line."""
+    and the file (a truncated, crafted or foreign file; a FIFO or a device, which a read would block on), one
+    line."""
+    regular_file(path, option, "file of " + what)
     try:
         return torch.load(path, map_location=map_location, weights_only=True)
     except (pickle.UnpicklingError, RuntimeError, EOFError, KeyError, TypeError, ValueError, AttributeError,
@@ -65,7 +68,7 @@ def _first_line(exc: BaseException) -> str:
 def recipe(path=None) -> dict:
     """The recipe (command, data set, seed, history) recorded beside the weights."""
     path = Path(path) if path is not None else DEFAULT_WEIGHTS
-    where = path.with_suffix(".json")
+    where = regular_file(path.with_suffix(".json"), "weights", "recipe file (JSON)")
     try:
         data = json.loads(where.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:

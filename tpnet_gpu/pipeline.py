@@ -30,6 +30,7 @@ from tpnet_gpu.disparity.grid import grow
 from tpnet_gpu.disparity.per_pixel import per_pixel
 from tpnet_gpu.disparity.pixel_check import MIN_SUPPORT, fill_background, left_right, tile_answers
 from tpnet_gpu.disparity.two_surface import Surfaces, measure_surfaces
+from tpnet_gpu.io.paths import regular_file
 from tpnet_gpu.net import infer
 from tpnet_gpu.net.context import context_step
 from tpnet_gpu.net.layers import NetworkLayers, lags_match
@@ -186,9 +187,7 @@ class Pipeline:
         them (else ValueError), or the shipped ones that were, or None (logged: the engine's result)."""
         lags = [list(v) for v in self.layers.lags]
         if weights is not None:
-            if not Path(weights).is_file():
-                raise FileNotFoundError(f"weights: expected a weights file (from `tpnet train`), got {weights}, "
-                                        "which is not a file")
+            regular_file(weights, "weights", "weights file (from `tpnet train`)")
             if not lags_match(infer.lags(weights), self.layers.lags):
                 raise ValueError(f"weights: {weights} were trained for a rig whose layers have lags "
                                  f"{[list(v) for v in infer.lags(weights)]}; this pipeline's rig has {lags} "

@@ -40,11 +40,27 @@ def test_export_writes_a_checked_onnx_file_and_overwrites_on_request(tmp_path, c
     path = tmp_path / "net.onnx"
     path.write_bytes(b"old")
     assert main(["export", str(path), "--overwrite"]) == 0
-    assert "tiles_y, tiles_x >= 2 dynamic" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert "tiles_y, tiles_x >= 2 dynamic" in captured.out
+    assert "Warning" not in captured.err and "torchvision" not in captured.err  # the exporter's chatter stays off
     model = onnx.load(str(path))
+    assert [(i.domain, i.version) for i in model.opset_import if i.domain in ("", "ai.onnx")] == [("", 18)]
     onnx.checker.check_model(model, full_check=True)
     shapes = {v.name: [d.dim_param or d.dim_value for d in v.type.tensor_type.shape.dim]
               for v in (*model.graph.input, *model.graph.output)}
     assert shapes == {"layers": ["tiles_y", "tiles_x", 4, 9, 9], "target": ["tiles_y", "tiles_x"],
                       "disparity": ["tiles_y", "tiles_x"]}
     assert [p.name for p in tmp_path.iterdir()] == ["net.onnx"]  # no temporary file left beside it
+
+
+def test_export_refuses_an_opset_the_installed_onnx_cannot_write(tmp_path, capsys):
+    # Before: `--opset 99999` printed the version converter's traceback, exited 0 and wrote opset 18.
+    onnx = pytest.importorskip("onnx", reason="the onnx extra is not installed (pip install 'tpnet-gpu[onnx]')")
+    pytest.importorskip("onnxscript", reason="the onnx extra is not installed (pip install 'tpnet-gpu[onnx]')")
+    highest = onnx.defs.onnx_opset_version()  # the oracle: what the installed onnx says it knows
+    for opset in (highest + 1, 99999):
+        assert main(["export", str(tmp_path / "net.onnx"), "--opset", str(opset)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"tpnet export: error: opset: expected an int in 18..{highest} (the installed onnx knows no "
+                       f"later one), got {opset}"]
+    assert not list(tmp_path.iterdir())

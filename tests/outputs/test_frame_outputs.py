@@ -153,7 +153,7 @@ def test_weights_a_trained_file_and_one_for_another_rig(processed, tmp_path, cap
     assert err.startswith("tpnet process: error: weights:") and "lags" in err and "\n" not in err
     assert not (tmp_path / "b").exists()
     assert main(["process", str(folder), "--out", str(tmp_path / "c"), "--weights", str(tmp_path / "no.pt")]) == 2
-    assert "weights: expected a weights file" in capsys.readouterr().err
+    assert "weights: weights file (from `tpnet train`) not found" in capsys.readouterr().err
 
 
 def test_verbose_logs_and_no_progress_bar_off_a_terminal(processed, tmp_path, capsys):

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from tpnet_gpu import tables
+from tpnet_gpu.io.paths import regular_file
 
 MIN_IMAGE_SIDE = 8  # one tile step: a smaller image holds less than one tile
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -68,12 +69,8 @@ def read_image(path, *, name: str = "path") -> ImageData:
             samples of another type or layout (e.g. a 4-D stack or a Bayer CFA), NaN or infinite samples, or
             a side under ``MIN_IMAGE_SIDE`` pixels.
     """
-    path = Path(path)
+    path = regular_file(path, name, "image file", ImageFormatError)
     where = f"{name}: {path}"
-    if not path.exists():
-        raise FileNotFoundError(f"{name}: image file not found: {path}")
-    if not path.is_file():
-        raise ImageFormatError(f"{where}: expected an image file, got a folder")
     with open(path, "rb") as f:
         head = f.read(32)
     if head[:4] in TIFF_SIGNATURES:

@@ -18,6 +18,7 @@ import numpy as np
 import rawpy
 import tifffile
 
+from tpnet_gpu.io.paths import regular_file
 from tpnet_gpu.tables import cfa_red_position
 
 SCENE_FORMAT = "tpnet-gpu scene"
@@ -96,10 +97,7 @@ def _site_levels(value, name: str) -> np.ndarray:
 
 
 def _existing(path) -> Path:
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"raw file not found: {path}")
-    return path
+    return regular_file(path, "raw", "raw file", RawFormatError)
 
 
 def _bayer_layout(raw, path: Path) -> str:

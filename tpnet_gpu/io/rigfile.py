@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from tpnet_gpu.camera import DISTORTION_TERMS, EXTRINSIC_TERMS, Rig
+from tpnet_gpu.io.paths import kind, regular_file
 
 FORMAT = "tpnet-gpu rig"
 VERSION = 1
@@ -221,8 +222,7 @@ def read_rig(path) -> Rig:
     """
     path = Path(path)
     suffix = _suffix(path, "path")
-    if not path.is_file():
-        raise FileNotFoundError(f"rig file not found: {path}")
+    regular_file(path, "rig", "rig file", RigFileError)
     try:
         text = path.read_text(encoding="utf-8")
         data = json.loads(text) if suffix == ".json" else tomllib.loads(text)
@@ -281,7 +281,7 @@ def examples() -> dict[str, Path]:
 def resolve(spec) -> Path:
     """A rig file path, or the name of a shipped example (``quad``, ``binocular``, ...; a file wins)."""
     path = Path(spec)
-    if path.is_file():
+    if kind(path) is not None:  # a file wins (read_rig refuses a folder, a FIFO or a device, naming it)
         return path
     found = examples().get(str(spec))
     if found is not None:

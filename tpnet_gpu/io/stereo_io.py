@@ -310,4 +310,4 @@ def load_frame(path, *, cfa: str | None = None, colour: str = "luma") -> Frames:
         return _scene_frames(path)[0]
     if not path.exists():
         raise FileNotFoundError(f"path: no such scene folder or file: {path}")
-    return _raw_frames([path], cfa) if _is_raw(path, cfa) else load_images([path], colour=colour, names=[str(path)])
+    return _raw_frames([path], cfa) if _is_raw(path, cfa) else load_images([path], colour=colour, names=["frame"])
