@@ -54,8 +54,9 @@ def pair_folders(paths) -> list[Path]:
     return folders
 
 
-def run_pair(pair: rp.Pair, backend: str | None, device: str) -> dict:
-    """Every method's maps on one pair (host arrays cut to the image: tiles ``(ty, tx)``, pixels ``(h, w)``)."""
+def run_pair(pair: rp.Pair, backend: str | None, device: str, weights=None) -> dict:
+    """Every method's maps on one pair (host arrays cut to the image: tiles ``(ty, tx)``, pixels ``(h, w)``);
+    ``weights``: the TPNET rows' weights (default: those shipped for mono pairs)."""
     from tpnet_gpu.disparity.pixel_check import tile_answers  # noqa: PLC0415 - torch and the kernels on use
     from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415
     from tpnet_gpu.io.stereo_io import load_inputs  # noqa: PLC0415
@@ -68,8 +69,9 @@ def run_pair(pair: rp.Pair, backend: str | None, device: str) -> dict:
                          ("engine", PipelineConfig(method="engine", textures=False)),
                          ("tpnet, no checks", PipelineConfig(cross_check=False, per_pixel=False, textures=False,
                                                              method="tpnet"))):
+        given = {"weights": weights} if weights is not None and config.method != "engine" else {}
         make = functools.partial(Pipeline, height, width, cfa=None, rig=rig, min_disparity=0.0,
-                                 max_disparity=pair.max_disparity, device=device, backend=backend)
+                                 max_disparity=pair.max_disparity, device=device, backend=backend, **given)
         try:  # the network wherever weights fit these frames, those shipped on request included (mono pairs)
             pipeline = make(config=config)
         except ValueError as exc:  # none fit: the pipeline's default, the engine's answers
@@ -228,6 +230,8 @@ def add_run_options(parser, json: str, figures: str) -> None:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--json", default=json, help="output JSON path ('' to skip)")
     parser.add_argument("--figures", default=figures, help="folder of the per-scene figures ('' to skip)")
+    parser.add_argument("--weights", default=None, help="the tpnet rows' TPNET weights (default: those shipped for "
+                        "mono pairs): what a trained network adds on these pairs")
 
 
 def main(argv=None) -> dict:
@@ -240,19 +244,21 @@ def main(argv=None) -> dict:
         folders = pair_folders(args.dirs)
     except ValueError as exc:
         parser.error(str(exc))
-    report = {"bench": "real", **bench_folders(folders, args.backend, args.device, args.figures)}
+    report = {"bench": "real", **bench_folders(folders, args.backend, args.device, args.figures,
+                                                      weights=args.weights)}
     if args.json:
         common.save_json(report, args.json)
     return report
 
 
-def bench_folders(folders, backend: str | None, device: str, figures) -> dict:
+def bench_folders(folders, backend: str | None, device: str, figures, weights=None) -> dict:
     """Every method on each pair folder, scored; prints the table. ``figures``: folder of the per-scene figures
-    (falsy: none). Returns the report's body (pairs, per scene, pooled, machine, table lines)."""
+    (falsy: none); ``weights``: the tpnet rows' (``run_pair``). Returns the report's body (pairs, per scene,
+    pooled, machine, table lines, weights)."""
     per_scene, arrays = {}, []
     for folder in folders:
         pair = rp.load_pair(folder)
-        maps = run_pair(pair, backend, device)
+        maps = run_pair(pair, backend, device, weights)
         scores, arr = score_pair(pair, maps)
         per_scene[pair.name] = scores
         arrays.append(arr)
@@ -262,7 +268,7 @@ def bench_folders(folders, backend: str | None, device: str, figures) -> dict:
     pool = pooled(arrays)
     lines = table(per_scene, pool)
     print("\n".join(lines))
-    return {"pairs": [str(f) for f in folders], "per_scene": per_scene, "pooled": pool,
+    return {"pairs": [str(f) for f in folders], "per_scene": per_scene, "pooled": pool, "weights": weights,
             "machine": common.machine_info(), "table": lines}
 
 

@@ -48,8 +48,9 @@ def main(argv=None) -> dict:
                                         gt_step=args.gt_step)
         except (FileExistsError, ValueError) as exc:
             parser.error(f"--pairs/--size/--gt-step: {exc}")
+        scores = bench_real.bench_folders(folders, args.backend, args.device, args.figures, weights=args.weights)
         report = {"bench": "rendered_pairs", "cases": list(cases), "size": list(size), "seed": args.seed,
-                  "gt_step": args.gt_step, **bench_real.bench_folders(folders, args.backend, args.device, args.figures)}
+                  "gt_step": args.gt_step, **scores}
     if args.json:
         common.save_json(report, args.json)
     return report

@@ -121,3 +121,19 @@ def test_bench_real_without_opencv_is_one_line(tmp_path, monkeypatch, capsys):
     assert cli.main(["bench", "real", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "opencv-python-headless" in err and err.count("\n") == 1, err
+
+
+def test_bench_real_runs_the_weights_it_is_given(tmp_path, capsys):
+    # Oracle: weights trained for the quad's lags cannot run on a pair - the pipeline's own refusal, so the
+    # tpnet rows did load the file given (before --weights they always ran the shipped mono-pair weights)
+    if not (REALDATA / "tsukuba" / "meta.json").is_file():
+        pytest.skip(f"no real pairs at {REALDATA}")
+    pytest.importorskip("cv2")
+    from tpnet_gpu import cli
+    from tpnet_gpu.net import infer
+
+    quad = infer.WEIGHTS_DIR / "tpnet_synthetic_v6.pt"
+    assert cli.main(["bench", "real", str(REALDATA / "tsukuba"), "--weights", str(quad), "--json", "",
+                     "--figures", ""]) == 2
+    err = capsys.readouterr().err
+    assert f"weights: {quad} were trained for a rig whose layers have lags" in err and err.count("\n") == 1, err
