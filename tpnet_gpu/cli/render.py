@@ -14,6 +14,8 @@ RENDER_MIN_SIDE = 24  # the smallest multiple of 8 that rawio.LIBRAW_MIN_SIDE al
 def run(args: argparse.Namespace) -> int:
     from tpnet_gpu.outputs import claimed  # noqa: PLC0415
 
+    if not 0 <= args.seed < 2**63:  # numpy's generators take no other (its own message names nothing)
+        raise ValueError(f"--seed: expected an integer in 0..2**63-1, got {args.seed}")
     for option, value in (("--width", args.width), ("--height", args.height)):
         if value % 8 or value < RENDER_MIN_SIDE:
             raise ValueError(f"{option}: expected a multiple of 8 that is at least {RENDER_MIN_SIDE} (LibRaw reads "
