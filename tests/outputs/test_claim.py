@@ -145,3 +145,28 @@ def test_root_and_mount_points_are_refused_before_any_work(tmp_path):
         if os.path.ismount(mount):
             with pytest.raises(ValueError, match="--out: expected a folder that can be replaced, got the mount point"):
                 check(mount, overwrite=True)
+
+
+def test_a_write_past_the_file_size_limit_names_the_file_and_leaves_nothing(tmp_path):
+    # Oracle: the kernel's RLIMIT_FSIZE (Python ignores SIGXFSZ, so the write fails with EFBIG); before, the
+    # message was the writer's "6144 requested and 4028 written", naming no file.
+    script = textwrap.dedent(f"""
+        import resource, sys
+        sys.path.insert(0, {str(ROOT)!r})
+        from tpnet_gpu.outputs import output_file, output_folder
+        resource.setrlimit(resource.RLIMIT_FSIZE, (50_000, 50_000))
+        for make in (lambda: output_folder({str(tmp_path / "out")!r}, overwrite=False),
+                     lambda: output_file({str(tmp_path / "f.bin")!r}, overwrite=False)):
+            try:
+                with make() as target:
+                    path = target / "big.tif" if target.is_dir() else target
+                    with open(path, "wb") as f:
+                        f.write(b"x" * 100_000)
+            except OSError as exc:
+                print(exc)
+    """)
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    lines = done.stdout.strip().splitlines()
+    assert lines == [f"--out: writing {tmp_path / 'out' / 'big.tif'} failed, nothing written (File too large)",
+                     f"--out: writing {tmp_path / 'f.bin'} failed, nothing written (File too large)"], done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

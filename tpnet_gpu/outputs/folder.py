@@ -118,10 +118,25 @@ def output_folder(out, *, overwrite: bool, inputs: Iterable = (), option: str = 
             mark(staging, "staging")
             os.chmod(staging, 0o777 & ~umask())
             yield staging
+        except OSError as exc:  # a full disk, a file-size limit: the writers' messages name no file
+            newest = _newest(staging)
+            shutil.rmtree(staging, ignore_errors=True)
+            raise OSError(f"{option}: writing {out / newest if newest else out} failed, nothing written "
+                          f"({exc.strerror or exc})") from exc
         except BaseException:
             shutil.rmtree(staging, ignore_errors=True)
             raise
-        _put_in_place(staging, out, keep_others)
+        try:
+            _put_in_place(staging, out, keep_others)
+        except OSError as exc:  # EBUSY, EXDEV, EROFS on the renames: the old output stays (module docstring)
+            shutil.rmtree(staging, ignore_errors=True)
+            raise OSError(f"{option}: cannot put the new output in place as {out} ({exc.strerror or exc})") from exc
+
+
+def _newest(folder: Path) -> str | None:
+    """The name of the file written last in ``folder`` (the one a failed write was writing), or None."""
+    files = [p for p in folder.iterdir() if p.is_file() and p.name != MARKER]
+    return max(files, key=lambda p: p.stat().st_mtime_ns).name if files else None
 
 
 def _put_in_place(staging: Path, out: Path, keep_others: bool = True) -> None:
@@ -130,9 +145,18 @@ def _put_in_place(staging: Path, out: Path, keep_others: bool = True) -> None:
         (out / MARKER).unlink()
         return
     old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
-    mark(old, "old output")  # a run killed from here on leaves it for the next claim to put back
-    os.replace(out, old / "folder")
-    os.replace(staging, out)
+    try:
+        mark(old, "old output")  # a run killed from here on leaves it for the next claim to put back
+        os.replace(out, old / "folder")
+    except OSError:  # e.g. EBUSY: the old output cannot be moved; it stays where it is
+        shutil.rmtree(old, ignore_errors=True)
+        raise
+    try:
+        os.replace(staging, out)
+    except OSError:
+        os.replace(old / "folder", out)  # the old output back, whole
+        shutil.rmtree(old, ignore_errors=True)
+        raise
     (out / MARKER).unlink()
     kept = old / "folder"
     for entry in kept.iterdir() if keep_others else ():  # the old files this output does not replace stay
@@ -165,6 +189,9 @@ def output_file(path, *, overwrite: bool, option: str = "--out") -> Iterator[Pat
         tmp = Path(name)
         try:
             yield tmp
+        except OSError as exc:  # the writer's message names the temporary file, or none
+            tmp.unlink(missing_ok=True)
+            raise OSError(f"{option}: writing {path} failed, nothing written ({exc.strerror or exc})") from exc
         except BaseException:
             tmp.unlink(missing_ok=True)
             raise
