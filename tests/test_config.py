@@ -4,7 +4,7 @@ Oracle: the pinhole law d = f B / (Z p) written out with the quad's numbers, and
 import pytest
 
 from tpnet_gpu.camera import Rig
-from tpnet_gpu.config import EngineConfig, disparity_range
+from tpnet_gpu.config import DatasetSpec, EngineConfig, TrainConfig, disparity_range
 
 
 def test_the_range_is_bound_by_the_frame():
@@ -41,3 +41,18 @@ def test_the_default_range_ends_at_the_nearest_distance():
 def test_bad_ranges_are_refused_naming_the_argument(low, high, match):
     with pytest.raises(ValueError, match=match):
         disparity_range(low, high, Rig(), 8.0)
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda: DatasetSpec(seed=-1), r"seed: expected an integer >= 0, got -1"),  # before: numpy's message
+    (lambda: DatasetSpec(supersample=-1), r"supersample: expected an integer >= 1"),  # before: a traceback
+    (lambda: DatasetSpec(scenes=2**70), r"scenes: expected an integer >= 1"),
+    (lambda: DatasetSpec(test_fraction=1.0), r"test_fraction: expected a share in \[0, 1\)"),
+    (lambda: TrainConfig(epochs=-1), r"epochs: expected an integer >= 1, got -1"),  # before: a traceback
+    (lambda: TrainConfig(batch=0), r"batch: expected an integer >= 1"),
+    (lambda: TrainConfig(seed=True), r"seed: expected an integer >= 0"),
+])
+def test_data_set_and_training_numbers_are_checked_naming_the_field(make, match):
+    # issue 40 item 6: the hostile campaign's option bounds of `tpnet dataset` / `tpnet train` found these
+    with pytest.raises(ValueError, match=match):
+        make()

@@ -151,8 +151,15 @@ class DatasetSpec:
     curved: float = 0.0
 
     def __post_init__(self):
+        for name, low in (("scenes", 1), ("width", 16), ("height", 16), ("seed", 0), ("supersample", 1),
+                          ("near_draws", 0)):  # numpy's generators and the renderer take no other
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not low <= value < 2**63:
+                raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
         if not 0.0 <= self.curved <= 1.0:
             raise ValueError(f"curved: expected a probability in [0, 1], got {self.curved!r}")
+        if not 0.0 <= self.test_fraction < 1.0:
+            raise ValueError(f"test_fraction: expected a share in [0, 1), got {self.test_fraction!r}")
         colours = 1 if self.cfa is None else 3
         if len(self.colour_weights) != colours:
             raise ValueError(f"colour_weights: expected {colours} value(s) for cfa {self.cfa!r}, got "
@@ -210,6 +217,10 @@ class TrainConfig:
     pass_every: int | None = None
 
     def __post_init__(self):
+        for name, low in (("epochs", 1), ("batch", 1), ("seed", 0)):  # what torch and numpy take
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not low <= value < 2**63:
+                raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
         if self.pass_every is not None and (isinstance(self.pass_every, bool) or not isinstance(self.pass_every, int)
                                             or self.pass_every < 1):
             raise ValueError(f"pass_every: expected None or a positive number of epochs, got {self.pass_every!r}")

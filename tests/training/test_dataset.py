@@ -199,3 +199,14 @@ def test_photo_data_set_stores_8_bit_photographs(tmp_path, capsys):
     assert "--photo" in capsys.readouterr().err and not (tmp_path / "q").exists()
     with pytest.raises(ValueError, match="photo"):
         DatasetSpec(photo=True)
+
+
+def test_a_scene_that_fails_leaves_no_temporary_chunk(tmp_path, monkeypatch):
+    # issue 40 item 6 (the campaign's `dataset --supersample -1`): the failed scene's .tmp-*.npz stayed behind
+    def failing(*args, **kwargs):
+        raise ValueError("supersample: bad")
+
+    monkeypatch.setattr(dataset, "build_scene", failing)
+    with pytest.raises(ValueError, match="supersample: bad"):
+        dataset.write_chunk(tmp_path, 0, SPEC, None, None, None)
+    assert list(tmp_path.iterdir()) == []

@@ -34,8 +34,12 @@ from cases import Case, all_cases  # noqa: E402 - this folder's own module, foun
 ERROR_LINE = re.compile(r"^tpnet [\w-]+: error: ")
 
 
+DATA = ["dataset", "--scenes", "2", "--width", "64", "--height", "48", "--supersample", "1", "--rig", "binocular",
+        "--mono"]  # the tiny data set the train cases read (``{data}``), made once per campaign
+
+
 def _argv(case: Case, folder: Path) -> list[str]:
-    return [a.replace("{d}", str(folder)) for a in case.argv]
+    return [a.replace("{d}", str(folder)).replace("{data}", str(folder.parent / "data")) for a in case.argv]
 
 
 def _start(tpnet: list[str], argv: list[str]) -> subprocess.Popen:
@@ -144,6 +148,9 @@ def main(argv=None) -> int:
     cases = [c for c in all_cases(args.quick) if args.only is None or args.only in f"{c.cls}: {c.name}"]
     results = []
     with tempfile.TemporaryDirectory(prefix="tpnet-hostile-", dir=args.work) as work:
+        if any("{data}" in a for c in cases for a in c.argv):
+            subprocess.run([*tpnet, DATA[0], str(Path(work) / "data"), *DATA[1:]], capture_output=True,
+                           timeout=args.timeout * 5, check=True)
         for i, case in enumerate(cases):
             result = run_case(case, tpnet, Path(work) / f"{i:03d}", args.timeout)
             results.append(result)

@@ -176,9 +176,22 @@ def option_bounds(quick: bool = False) -> list[Case]:
         "render --seed": (["render", "{d}/o", "--width", "48", "--height", "32", "--supersample", "1"], "--seed", []),
         "export --opset": (["export", "{d}/n.onnx"], "--opset", []),
     }
+    dataset = ["dataset", "{d}/data", "--scenes", "1", "--width", "64", "--height", "48", "--supersample", "1",
+               "--rig", "binocular", "--mono"]
+    train = ["train", "{data}", "--rig", "binocular", "--epochs", "1", "--batch", "1", "--out", "{d}/w.pt"]
+    slow = {f"dataset {o}": (dataset, o, []) for o in ("--scenes", "--test-fraction", "--seed", "--supersample",
+                                                        "--curved")}
+    slow.update({f"train {o}": (train, o, []) for o in ("--epochs", "--batch", "--threads", "--error-scale",
+                                                        "--random-weight", "--lr-from", "--pass-every")})
+    slow["flow --camera"] = (["flow", "{d}/pair/left.png", "{d}/pair/right.png", "--out", "{d}/o"], "--camera", [])
     if quick:
         options = {k: options[k] for k in ("process --max-disparity", "process --memory-limit", "export --opset")}
     out = []
+    for label, (base, option, more) in slow.items() if not quick else ():  # values that must be refused fast
+        for value in ("nan", "-1", "1e308", "1" * 5000, "abc"):
+            shown = value if len(value) < 12 else f"{value[:3]}...({len(value)} chars)"
+            out.append(Case("option bounds", f"{label} {shown!r}", [*base, *more, f"{option}={value}"], "0|2",
+                            lambda d: pair(d / "pair"), names=option))
     for label, (base, option, more) in options.items():
         for value in values:
             shown = value if len(value) < 12 else f"{value[:3]}...({len(value)} chars)"

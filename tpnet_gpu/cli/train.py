@@ -13,11 +13,13 @@ def run(args: argparse.Namespace) -> int:
 
     from tpnet_gpu.net.train import TrainConfig, train  # noqa: PLC0415
 
-    torch.set_num_threads(args.threads)
+    if not 1 <= args.threads <= 1024:  # torch's own refusal is a RuntimeError traceback
+        raise ValueError(f"--threads: expected 1..1024 CPU threads, got {args.threads}")
     config = TrainConfig(epochs=args.epochs, batch=args.batch, seed=args.seed, w_mode=args.w_mode,
                          error_scale=args.error_scale or None,
                          variant_weights=tuple(args.random_weight if v == "random" else 1.0 for v in TrainConfig.variants),
                          init=args.init, lr_from=args.lr_from, pass_every=args.pass_every)
+    torch.set_num_threads(args.threads)
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
     rig = None
     if args.rig is not None:

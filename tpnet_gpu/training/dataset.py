@@ -146,7 +146,11 @@ def write_chunk(folder, index: int, spec: DatasetSpec, engine, processor, layers
     if not path.exists():
         handle, tmp = tempfile.mkstemp(prefix=f".{path.stem}.tmp-", suffix=".npz", dir=path.parent)  # unique:
         os.close(handle)  # two workers (two machines on a shared folder) never write one temporary file
-        np.savez_compressed(tmp, **build_scene(index, spec, engine, processor, layers))
+        try:
+            np.savez_compressed(tmp, **build_scene(index, spec, engine, processor, layers))
+        except BaseException:
+            os.unlink(tmp)  # a failed or interrupted scene leaves nothing (the build resumes without it)
+            raise
         os.replace(tmp, path)
     return path
 
