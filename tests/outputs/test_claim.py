@@ -66,7 +66,7 @@ def test_of_two_simultaneous_writers_exactly_one_succeeds_and_its_result_is_whol
     errors = [p.stderr.read() for p in runs]
     assert sorted(codes) == [0, 2], errors
     winner = ("one", "two")[codes.index(0)]
-    assert "being written by pid" in errors[codes.index(2)] or "holds files" in errors[codes.index(2)]
+    assert "is being written by another tpnet run" in errors[codes.index(2)] or "holds files" in errors[codes.index(2)]
     assert {p.name: p.read_text() for p in out.iterdir()} == {"a": winner, "b": winner}
     assert _leftovers(tmp_path) == []
 
@@ -123,7 +123,7 @@ def test_a_live_holder_is_named_and_a_second_claim_is_refused_at_once(tmp_path):
         script = f"import sys; sys.path.insert(0, {str(ROOT)!r})\nfrom tpnet_gpu.outputs import claimed\n" \
                  f"with claimed({str(out)!r}, overwrite=False): pass"
         done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
-        assert done.returncode != 0 and f"being written by pid {os.getpid()}" in done.stderr
+        assert done.returncode != 0 and f"being written by another tpnet run (pid {os.getpid()})" in done.stderr
     assert _leftovers(tmp_path) == [] and not out.exists()  # nothing written: the folder made for it is not left
 
 

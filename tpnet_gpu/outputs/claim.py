@@ -42,10 +42,12 @@ def mark(folder: Path, kind: str) -> None:
 
 
 def _holder(lock: Path) -> str:
+    """Who holds the claim, as the refusal says it (the pid is written just after the lock is taken, so a run
+    that looks in between finds none)."""
     try:
-        return f"pid {int(lock.read_text().strip())}"
+        return f"another tpnet run (pid {int(lock.read_text().strip())})"
     except (OSError, ValueError):
-        return "another run"
+        return "another tpnet run"
 
 
 def _acquire(lock: Path, *, wait: bool, option: str, out: Path) -> int:
@@ -57,8 +59,8 @@ def _acquire(lock: Path, *, wait: bool, option: str, out: Path) -> int:
         except BlockingIOError:
             os.close(fd)
             if not wait:
-                raise ValueError(f"{option}: {out} is being written by {_holder(lock)} (another tpnet run); "
-                                 "wait for it to finish or choose another folder") from None
+                raise ValueError(f"{option}: {out} is being written by {_holder(lock)}; wait for it to finish "
+                                 "or choose another folder") from None
             if not announced and time.monotonic() - start > WAIT_LOG_S:
                 print(f"{option}: waiting for {_holder(lock)}, which is writing {out}", flush=True)
                 announced = True

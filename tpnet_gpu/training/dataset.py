@@ -179,9 +179,7 @@ def build(folder, spec: DatasetSpec = DatasetSpec(), *, device: str | None = Non
     same chunks, bit for bit) - or None to build them here, one after another."""
     from tpnet_gpu.runtime.progress import bar  # noqa: PLC0415
 
-    if spec.scenes < 1:
-        raise ValueError(f"spec.scenes: expected at least 1 scene, got {spec.scenes}")
-    folder = Path(folder)
+    folder = Path(folder)  # (a spec of no scenes is refused when it is made: DatasetSpec)
     folder.mkdir(parents=True, exist_ok=True)
     missing = [i for i in range(spec.scenes) if not chunk_path(folder, i).exists()]
     if chunks is not None:
