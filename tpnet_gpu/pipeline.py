@@ -26,6 +26,8 @@ from tpnet_gpu.config import PipelineConfig, TextureConfig, disparity_range
 from tpnet_gpu.disparity import budget
 from tpnet_gpu.disparity.checks import CROSS_CHECK_PX, cross_camera, cross_difference, windows_inside
 from tpnet_gpu.disparity.engine import DisparityEngine
+from tpnet_gpu.disparity.follow import REFRESH
+from tpnet_gpu.disparity.results import DisparityResult
 from tpnet_gpu.disparity.grid import grow
 from tpnet_gpu.disparity.per_pixel import per_pixel
 from tpnet_gpu.disparity.pixel_check import MIN_SUPPORT, fill_background, left_right, tile_answers
@@ -76,6 +78,8 @@ class FrameResult:
         pixels_measured: where the per-pixel left-right check ran (``per_pixel`` and ``cross_check``, the
             default for mono pairs): ``(H, W)`` bool, the pixels whose match in the other view answered back the
             same disparity; ``pixels`` elsewhere is the background fill (disparity.md §10). Else None.
+        engine: the disparity engine's own ``DisparityResult`` (its tensors valid until the next frame): what
+            ``process(frames, previous=...)`` follows on the next frame of a video.
     """
 
     disparity: torch.Tensor
@@ -90,6 +94,7 @@ class FrameResult:
     pixels: torch.Tensor | None = None
     checked: torch.Tensor | None = None
     pixels_measured: torch.Tensor | None = None
+    engine: DisparityResult | None = None
 
 
 class Pipeline:
@@ -214,10 +219,12 @@ class Pipeline:
             return None
         return found
 
-    def process(self, frames) -> FrameResult:
-        """Frames ``(cams, H, W)`` (torch on any device or NumPy, any real dtype; black level subtracted)."""
+    def process(self, frames, previous: DisparityResult | None = None) -> FrameResult:
+        """Frames ``(cams, H, W)`` (torch on any device or NumPy, any real dtype; black level subtracted).
+        ``previous``: the engine's result on the frame before (``FrameResult.engine``; a video): the engine
+        follows it instead of searching the whole range (``disparity.follow``; ``stream(follow=True)``)."""
         cfg = self.config
-        result = self.engine.run(frames)
+        result = self.engine.run(frames, previous)
         measured = torch.isfinite(result.disparity)
         initial = result.disparity
         disparity = initial
@@ -270,7 +277,7 @@ class Pipeline:
             confidence = torch.where(keep, confidence, torch.zeros_like(confidence))
             passes += self._cross_passes
         return FrameResult(disparity, confidence, result.two_depth, initial, valid, texture, result.search,
-                           passes, surfaces, pixels, keep, pixels_measured)
+                           passes, surfaces, pixels, keep, pixels_measured, result)
 
     def _keep(self, disparity: torch.Tensor, confidence: torch.Tensor, other, tiebreak: torch.Tensor) -> torch.Tensor:
         """``(ty, tx)`` bool: the tiles ``PipelineConfig``'s checks and filters keep (see there); sets
@@ -297,18 +304,29 @@ class Pipeline:
             keep = _most_confident(keep, confidence, tiebreak, cfg.keep_fraction)
         return keep
 
-    def stream(self, frames: Iterable) -> Iterator[FrameResult | FrameError]:
+    def stream(self, frames: Iterable, *, follow: bool = False) -> Iterator[FrameResult | FrameError]:
         """Process an iterable of frames (e.g. a camera) one by one; each result is valid until the next.
 
         One result per frame, in order: a frame that ``process`` refuses or fails on (a wrong shape, a bad
         dtype, ...) gives a ``FrameError`` carrying the exception, and the stream goes on with the next frame
-        (whose result is what it would have been without the bad one). Errors of the iterable itself end it."""
+        (whose result is what it would have been without the bad one). Errors of the iterable itself end it.
+        ``follow``: a video - each frame's engine starts from the frame before's answers (``disparity.follow``),
+        with the full search on the first frame, every ``follow.REFRESH``-th and the one after a bad frame."""
+        previous, since = None, 0
         for index, item in enumerate(frames):
+            if since >= REFRESH:
+                previous, since = None, 0
             try:
-                result = self.process(item)
+                result = self.process(item, previous if follow else None)
             except Exception as exc:  # noqa: BLE001 - one bad frame must not end a camera's stream (issue 16)
+                previous, since = None, 0
                 yield FrameError(index, exc)
                 continue
+            engine = result.engine  # kept past the next frame's run, which reuses the engine's buffers
+            previous = DisparityResult(*(t.clone() if torch.is_tensor(t) else t for t in (
+                engine.disparity, engine.strength, engine.confidence, engine.two_depth, engine.search, engine.margin,
+                engine.tile_passes)))
+            since += 1
             yield result
 
 

@@ -326,3 +326,16 @@ def test_bench_ray(tmp_path, capsys):
     assert all(r["wall_s"]["median"] > 0 and r["speedup"] > 0 for r in report["rows"])
     assert report["rows"][1]["speedup"] == 1.0  # the peer
     assert "outputs identical in every row" in out and "[bench_ray]" in err
+
+
+def test_bench_video(tmp_path, capsys):
+    from tpnet_gpu.bench.accuracy import bench_video
+
+    argv = ["--sequences", "1", "--frames", "2", "--width", "128", "--height", "96"]
+    report, out, err = run_bench(bench_video, argv, tmp_path, capsys)
+    assert set(report["summary"]) == {"every frame searched", "following the frame before"}
+    assert all(s["frames"] == 1 for s in report["summary"].values())
+    followed, searched = (report["summary"][k]["passes"] for k in ("following the frame before",
+                                                                    "every frame searched"))
+    assert 1.0 <= followed < searched  # the followed frame reads every tile once, the searched one sweeps
+    assert report["table"][0] in out and "[video]" in err

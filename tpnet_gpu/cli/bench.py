@@ -7,7 +7,7 @@ import argparse
 # name -> the module (under tpnet_gpu.bench, by group) whose main(args) runs it
 GROUPS = {
     "accuracy": ("accuracy", "network", "network_limits", "network_context", "calibration", "flow", "two_surface",
-                 "real", "rendered_pairs"),
+                 "real", "rendered_pairs", "video"),
     "throughput": ("tp", "throughput", "startup", "ray"),
     "fuzz": ("fuzz",),
 }

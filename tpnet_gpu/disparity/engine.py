@@ -23,6 +23,7 @@ import torch
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig, disparity_range
 from tpnet_gpu.disparity import budget
+from tpnet_gpu.disparity.follow import follow
 from tpnet_gpu.disparity.grid import fill, neighbourhood, ring_median, settle, two_depth
 from tpnet_gpu.disparity.measure import CHUNK, Measurer, row_chunks
 from tpnet_gpu.disparity.occlusion import Occlusion, lowest
@@ -348,12 +349,14 @@ class DisparityEngine:
         self.scale = reference_scale(out)
         return out.mul_(self.scale)
 
-    def run(self, frames) -> DisparityResult:
-        """The whole engine on one frame ``(cams, H, W)`` (torch on any device or NumPy, any real dtype)."""
+    def run(self, frames, previous: DisparityResult | None = None) -> DisparityResult:
+        """The whole engine on one frame ``(cams, H, W)`` (torch on any device or NumPy, any real dtype);
+        ``previous``: this engine's result on the frame before (a video): the first stage follows it
+        (``disparity.follow``) instead of searching the whole range."""
         frames_t = self.normalise(frames)
         self.tp.load(frames_t)
         self.read_finite.fill_(False)
-        found, margin, passes = self.search()
+        found, margin, passes = self.search() if previous is None else follow(self, previous)
         disparity, strength, refine_passes = self.refine(found, self.first)
         passes += refine_passes
         disparity = self.leash(disparity, found, margin)
