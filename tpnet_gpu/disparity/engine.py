@@ -23,7 +23,7 @@ import torch
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig, disparity_range
 from tpnet_gpu.disparity import budget
-from tpnet_gpu.disparity.follow import follow
+from tpnet_gpu.disparity.follow import FOLLOW_TOLERANCE, follow
 from tpnet_gpu.disparity.grid import fill, neighbourhood, ring_median, settle, two_depth
 from tpnet_gpu.disparity.measure import CHUNK, Measurer, row_chunks
 from tpnet_gpu.disparity.occlusion import Occlusion, lowest
@@ -296,12 +296,13 @@ class DisparityEngine:
         return share
 
     # --- refinement ------------------------------------------------------------------------------------------
-    def refine(self, start: torch.Tensor, first: FirstMeasure | None = None) -> tuple[torch.Tensor, torch.Tensor,
-                                                                                       float]:
+    def refine(self, start: torch.Tensor, first: FirstMeasure | None = None, tolerance: float | None = None) \
+            -> tuple[torch.Tensor, torch.Tensor, float]:
         """Re-correlation from ``start`` on the tiles that still move: ``(disparity, strength, passes)``. With
         ``first``, a tile whose start lies within ``FIRST_BAND`` px of ``first.target`` takes that measurement as
-        its first pass (measured there, not again at ``start``)."""
+        its first pass (measured there, not again at ``start``). ``tolerance``: instead of ``config.tolerance``."""
         cfg = self.config
+        tolerance = cfg.tolerance if tolerance is None else tolerance
         t = start.clone()
         active = torch.isfinite(t)
         disparity = torch.full_like(t, float("nan"))
@@ -331,7 +332,7 @@ class DisparityEngine:
             flipped = good & torch.isfinite(prev_d) & (torch.sign(d) != torch.sign(prev_d)) & (prev_d != d)
             secant = (t * prev_d - prev_t * d) / torch.where(flipped, prev_d - d, torch.ones_like(d))
             nxt = torch.where(flipped, secant, t + d)
-            done = ~good | (d.abs() < cfg.tolerance) | ((nxt - t).abs() < cfg.tolerance)
+            done = ~good | (d.abs() < tolerance) | ((nxt - t).abs() < tolerance)
             prev_t, prev_d = torch.where(good, t, prev_t), torch.where(good, d, prev_d)
             t = torch.where(good & ~done, nxt, t)
             active = active & good & ~done
@@ -357,7 +358,8 @@ class DisparityEngine:
         self.tp.load(frames_t)
         self.read_finite.fill_(False)
         found, margin, passes = self.search() if previous is None else follow(self, previous)
-        disparity, strength, refine_passes = self.refine(found, self.first)
+        disparity, strength, refine_passes = self.refine(found, self.first,
+                                                         None if previous is None else FOLLOW_TOLERANCE)
         passes += refine_passes
         disparity = self.leash(disparity, found, margin)
         disparity, strength, more = self.consistency(disparity, strength)
