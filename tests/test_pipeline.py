@@ -124,7 +124,7 @@ def test_a_frame_outside_the_engine_allocates_little(frames, weights):
     pipe = Pipeline(RIG.height, RIG.width, weights=weights, device="cpu", max_disparity=12.0)
     pipe.process(frames)
     result = pipe.engine.run(frames)
-    pipe.engine.run = lambda _frames: result
+    pipe.engine.run = lambda _frames, _previous=None: result
     pipe.process(frames)  # warm-up: the network's stage-2 kernels are made once
     with warp_host_allocations() as warp_sizes:
         sizes = torch_allocations(lambda: pipe.process(frames))
