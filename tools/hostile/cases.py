@@ -139,14 +139,15 @@ def file_doors() -> list[Case]:
 def crafted_rigs() -> list[Case]:
     """Rig files whose numbers or structure no camera has."""
     zeros = "[" + ", ".join(["0"] * 13) + "]"
+    plain = RIG.format(px=0.0022, focal=4.5, ext=zeros)
     texts = {
         "pixel 1e-320": RIG.format(px="1e-320", focal=4.5, ext=zeros),
         "focal 1e308": RIG.format(px=0.0022, focal="1e308", ext=zeros),
         "extrinsics 1e300": RIG.format(px=0.0022, focal=4.5, ext="[" + ", ".join(["1e300"] * 13) + "]"),
-        "5000-digit width": RIG.format(px=0.0022, focal=4.5, ext=zeros).replace('"width": 64', '"width": ' + "1" * 5000),
+        "5000-digit width": plain.replace('"width": 64', '"width": ' + "1" * 5000),
         "nested 100000 deep": "[" * 100_000 + "]" * 100_000,
         "a list": "[1, 2]",
-        "NaN baseline": RIG.format(px=0.0022, focal=4.5, ext=zeros).replace('"baseline_mm": 258', '"baseline_mm": NaN'),
+        "NaN baseline": plain.replace('"baseline_mm": 258', '"baseline_mm": NaN'),
     }
     out = []
     for label, text in texts.items():
