@@ -24,6 +24,7 @@ from tpnet_gpu.net import infer
 from tpnet_gpu.net.layers import QUAD_LAGS, lags_match, rig_lags
 from tpnet_gpu.net.losses import main_loss, mirror_loss_frame, weights_loss
 from tpnet_gpu.net.model import TPNet
+from tpnet_gpu.outputs.folder import output_file
 
 _log = logging.getLogger(__name__)
 
@@ -236,13 +237,13 @@ def _train(data_folder, out_path, config: TrainConfig, *, checkpoint, progress: 
         history.append(record)
         bar.set_postfix(loss=f"{record['loss']:.4f}", rmse=f"{record['test_rmse_network']:.4f}")
         log(f"epoch {record['epoch']}: loss {record['loss']:.5f}, test RMSE {record['test_rmse_network']:.4f} px")
-        if checkpoint is not None:
-            checkpoint.parent.mkdir(parents=True, exist_ok=True)
-            torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch + 1,
-                        "history": history, "config": asdict(config),
-                        # as tensors: the checkpoint is read back with weights_only (no NumPy pickles)
-                        "pass_targets": None if pass_targets is None else [torch.from_numpy(t) for t in pass_targets]},
-                       checkpoint)
+        if checkpoint is not None:  # whole or not at all: a run killed while saving keeps the last checkpoint
+            with output_file(checkpoint, overwrite=True, option="checkpoint") as tmp:
+                torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch + 1,
+                            "history": history, "config": asdict(config),
+                            # as tensors: the checkpoint is read back with weights_only (no NumPy pickles)
+                            "pass_targets": None if pass_targets is None else [torch.from_numpy(t) for t in
+                                                                               pass_targets]}, tmp)
     rig_arg = "" if manifest["spec"].get("rig") is None else f" --rig {_rig_argument(manifest['spec']['rig'])}"
     mono_arg = (" --mono" if "cfa" in manifest["spec"] and manifest["spec"]["cfa"] is None else "") + (
         " --photo" if manifest["spec"].get("photo") else "")
@@ -275,9 +276,11 @@ def _rig_argument(rig: dict) -> str:
 
 
 def save_weights(model: TPNet, path, recipe: dict) -> Path:
-    """Write the state dict (``path``) and its recipe (``path`` with ``.json``)."""
+    """Write the state dict (``path``) and its recipe (``path`` with ``.json``), each whole or not at all
+    (``outputs.output_file``; replacing what is there: ``tpnet train`` asks for ``--overwrite`` first)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    torch.save({k: v.cpu() for k, v in model.state_dict().items()}, path)
-    path.with_suffix(".json").write_text(json.dumps(recipe, indent=1, default=str))
+    with output_file(path, overwrite=True, option="out") as tmp:
+        torch.save({k: v.cpu() for k, v in model.state_dict().items()}, tmp)
+    with output_file(path.with_suffix(".json"), overwrite=True, option="out") as tmp:
+        tmp.write_text(json.dumps(recipe, indent=1, default=str))
     return path

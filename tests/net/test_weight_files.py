@@ -120,3 +120,34 @@ def test_a_crafted_recipe_beside_weights_is_one_line(tmp_path, capsys, text, fie
     assert main(["export", str(tmp_path / "n.onnx"), "--weights", str(weights)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("tpnet export: error: weights: the recipe") and field in err[0], err
+
+
+def test_train_never_clobbers_weights_and_writes_them_whole(data, tmp_path, capsys, monkeypatch):  # noqa: F811
+    # Before: `tpnet train --out W` replaced existing weights without a word, and a run killed while saving left
+    # half a file. Oracles: the bytes of the file that was there, the CLI's one-line contract, and a save that
+    # fails half-way (torch.save raising after writing) leaving the old weights whole.
+    out = tmp_path / "w.pt"
+    out.write_bytes(b"earlier weights")
+    argv = ["train", str(data), "--out", str(out), "--epochs", "1", "--batch", "2", "--checkpoint",
+            str(tmp_path / "ck.pt"), "--threads", "1"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--out: expected a new file (or --overwrite)" in err and err.count("\n") == 1, err
+    assert out.read_bytes() == b"earlier weights"
+    real = torch.save
+
+    def failing(obj, f, *args, **kwargs):
+        real(obj, f, *args, **kwargs)
+        if str(f).endswith(".pt") and ".w.pt.tmp-" in str(f):
+            raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(torch, "save", failing)
+    assert main([*argv, "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert f"out: writing {out} failed, nothing written (No space left on device)" in err and err.count("\n") == 1
+    assert out.read_bytes() == b"earlier weights"  # the old file whole, no temporary beside it
+    assert not [p.name for p in tmp_path.iterdir() if ".tmp-" in p.name or p.name.endswith(".lock")]
+    monkeypatch.setattr(torch, "save", real)
+    assert main([*argv, "--overwrite"]) == 0
+    assert set(infer.read_tensors(out, "weights", "TPNET weights")) >= {"stage1.0.weight"}
+    assert out.with_suffix(".json").is_file()

@@ -4,41 +4,41 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 
-def write_rig_atomically(rig, out: Path, *, overwrite: bool, description: str) -> Path:
-    """Write ``rig`` (``rigfile.write_rig``) to a temporary file beside ``out``, then rename it into place: ``out`` is
-    either the old file or the whole new one. An existing ``out`` is refused without ``overwrite``."""
-    if out.exists() and not overwrite:
-        raise ValueError(f"--out: expected a new file (or --overwrite), got {out}, which exists")
-    if out.suffix.lower() not in (".json", ".toml"):
+def _rig_suffix(out) -> None:
+    if Path(out).suffix.lower() not in (".json", ".toml"):
         raise ValueError(f"--out: expected a .json or .toml rig file, got {out}")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.tmp-", suffix=out.suffix, dir=out.parent)
-    os.close(fd)
-    try:
-        from tpnet_gpu.io.rigfile import write_rig  # noqa: PLC0415 - numpy and the rig on use
 
+
+def write_rig_atomically(rig, out: Path, *, overwrite: bool, description: str) -> Path:
+    """Write ``rig`` (``rigfile.write_rig``) whole or not at all, under the claim on ``out``
+    (``outputs.output_file``: a temporary file beside it, renamed into place). An existing ``out`` is refused
+    without ``overwrite``."""
+    from tpnet_gpu.io.rigfile import write_rig  # noqa: PLC0415 - numpy and the rig on use
+    from tpnet_gpu.outputs import output_file  # noqa: PLC0415
+
+    _rig_suffix(out)
+    with output_file(out, overwrite=overwrite) as tmp:
         write_rig(rig, tmp, description=description)
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return out
+    return Path(out)
 
 
 def run(args: argparse.Namespace) -> int:
+    from tpnet_gpu.outputs import claimed_file  # noqa: PLC0415
+
+    _rig_suffix(args.out)  # before the work, not after it
+    with claimed_file(args.out, overwrite=args.overwrite) as out:  # before the work, not after it
+        return _claimed(args, out)
+
+
+def _claimed(args: argparse.Namespace, out: Path) -> int:
     from tpnet_gpu.io import rigfile
     from tpnet_gpu.calibration import CalibrationConfig, Frame, calibrate, edge_misalignment
     from tpnet_gpu.scenes.folder import load
 
-    out = Path(args.out)
-    if out.exists() and not args.overwrite:  # before the work, not after it
-        raise ValueError(f"--out: expected a new file (or --overwrite), got {out}, which exists")
     # the library's default and its check (rounds >= 1), before the work
     config = CalibrationConfig() if args.rounds is None else CalibrationConfig(rounds=args.rounds)
     rig = rigfile.load(args.rig)

@@ -4,6 +4,7 @@ resume)."""
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from tpnet_gpu.cli.common import DEVICE_HELP
 
@@ -12,6 +13,7 @@ def run(args: argparse.Namespace) -> int:
     import torch  # noqa: PLC0415
 
     from tpnet_gpu.net.train import TrainConfig, train  # noqa: PLC0415
+    from tpnet_gpu.outputs import claimed_file  # noqa: PLC0415
 
     if not 1 <= args.threads <= 1024:  # torch's own refusal is a RuntimeError traceback
         raise ValueError(f"--threads: expected 1..1024 CPU threads, got {args.threads}")
@@ -26,7 +28,11 @@ def run(args: argparse.Namespace) -> int:
         from tpnet_gpu.io import rigfile  # noqa: PLC0415
 
         rig = rigfile.load(args.rig)
-    result = train(args.data, args.out, config, checkpoint=args.checkpoint, device=device, rig=rig)
+    recipe = Path(args.out).with_suffix(".json")
+    if recipe.exists() and not args.overwrite:  # the recipe beside the weights is theirs: both or neither
+        raise ValueError(f"--out: expected new weights (or --overwrite), got {args.out}, whose recipe {recipe} exists")
+    with claimed_file(args.out, overwrite=args.overwrite) as out:  # before the training, not after it
+        result = train(args.data, out, config, checkpoint=args.checkpoint, device=device, rig=rig)
     last = result["history"][-1]
     print(f"trained {last['epoch']} epochs: loss {last['loss']:.5f}, test RMSE network {last['test_rmse_network']:.4f} "
           f"px vs its targets {last['test_rmse_target']:.4f} px -> {args.out}")
@@ -40,6 +46,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
     tr = sub.add_parser("train", help="train TPNET on a data set (checkpoints resume)")
     tr.add_argument("data", help="data set folder (from `tpnet dataset`)")
     tr.add_argument("--out", default="out/tpnet.pt", help="final weights (a recipe .json is written beside)")
+    tr.add_argument("--overwrite", action="store_true",
+                    help="replace existing weights at --out and their recipe (default: refuse them, before training)")
     tr.add_argument("--rig", default=None, metavar="FILE",
                     help="the rig to train for (a rig file or a shipped one): must be the data set's rig (its layer "
                          "lags); the network always has one layer per direction group of the data set's rig")

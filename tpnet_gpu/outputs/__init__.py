@@ -2,6 +2,6 @@
 maps and files (``frame_outputs``), point clouds (``pointcloud``) and the labelled figures (``figures``,
 matplotlib on use)."""
 
-from tpnet_gpu.outputs.folder import check, claimed, output_file, output_folder
+from tpnet_gpu.outputs.folder import check, claimed, claimed_file, output_file, output_folder
 
-__all__ = ["check", "claimed", "output_file", "output_folder"]
+__all__ = ["check", "claimed", "claimed_file", "output_file", "output_folder"]

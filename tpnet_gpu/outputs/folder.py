@@ -173,16 +173,38 @@ def _check_file(path: Path, *, overwrite: bool, option: str) -> None:
 
 
 @contextlib.contextmanager
-def output_file(path, *, overwrite: bool, option: str = "--out") -> Iterator[Path]:
-    """Yield a temporary path beside the file ``path`` to write, renamed to ``path`` when the block ends without an
-    exception (else removed); an existing ``path`` is refused without ``overwrite`` (a ``ValueError`` naming
-    ``option``), before any work. The claim on ``path`` is held while it writes (module docstring)."""
+def claimed_file(path, *, overwrite: bool, option: str = "--out") -> Iterator[Path]:
+    """``claimed`` for one file: check ``path`` (an existing one refused without ``overwrite``) and hold the claim
+    on it for the block - a command that works before it writes (``tpnet train``) writes it with ``output_file``
+    inside. Yields ``path`` resolved."""
     path = _resolve(path, option)
     _parents_are_folders(path, option)
     _check_file(path, overwrite=overwrite, option=option)
-    _make_parent(path, option)
-    with claim(path, wait=overwrite, option=option):
-        _check_file(path, overwrite=overwrite, option=option)  # the run before ours may have written it
+    made = _make_parent(path, option)
+    try:
+        with claim(path, wait=overwrite, option=option):
+            _check_file(path, overwrite=overwrite, option=option)  # the run before ours may have written it
+            _HELD.add(path)
+            try:
+                yield path
+            finally:
+                _HELD.discard(path)
+    except BaseException:
+        if made is not None and not any(p.is_file() for p in made.rglob("*")):  # only the folders made here
+            shutil.rmtree(made, ignore_errors=True)
+        raise
+
+
+@contextlib.contextmanager
+def output_file(path, *, overwrite: bool, option: str = "--out") -> Iterator[Path]:
+    """Yield a temporary path beside the file ``path`` to write, renamed to ``path`` when the block ends without an
+    exception (else removed); an existing ``path`` is refused without ``overwrite`` (a ``ValueError`` naming
+    ``option``), before any work. The claim on ``path`` is held while it writes (``claimed_file``; already held
+    by this process inside it)."""
+    resolved = _resolve(path, option)
+    held = contextlib.nullcontext(resolved) if resolved in _HELD else claimed_file(path, overwrite=overwrite,
+                                                                                   option=option)
+    with held as path:
         handle, name = tempfile.mkstemp(prefix=f".{path.name}.tmp-", suffix=path.suffix, dir=path.parent)
         os.fchmod(handle, 0o666 & ~umask())
         os.close(handle)
