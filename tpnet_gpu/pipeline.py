@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -312,7 +312,7 @@ class Pipeline:
         (whose result is what it would have been without the bad one). Errors of the iterable itself end it.
         ``follow``: a video - each frame's engine starts from the frame before's answers (``disparity.follow``),
         with the full search on the first frame, every ``follow.REFRESH``-th and the one after a bad frame."""
-        previous, since = None, 0
+        previous, since, kept = None, 0, None
         for index, item in enumerate(frames):
             if since >= REFRESH:
                 previous, since = None, 0
@@ -322,10 +322,15 @@ class Pipeline:
                 previous, since = None, 0
                 yield FrameError(index, exc)
                 continue
-            engine = result.engine  # kept past the next frame's run, which reuses the engine's buffers
-            previous = DisparityResult(*(t.clone() if torch.is_tensor(t) else t for t in (
-                engine.disparity, engine.strength, engine.confidence, engine.two_depth, engine.search, engine.margin,
-                engine.tile_passes)))
+            if follow:  # the engine's answers kept past the next frame's run (it reuses its buffers); the copies
+                engine = result.engine  # are made on the first frame and written in place after it
+                tensors = [f.name for f in fields(DisparityResult) if torch.is_tensor(getattr(engine, f.name))]
+                if kept is None:
+                    kept = replace(engine, **{name: getattr(engine, name).clone() for name in tensors})
+                else:
+                    for name in tensors:
+                        getattr(kept, name).copy_(getattr(engine, name))
+                previous = kept
             since += 1
             yield result
 
