@@ -82,24 +82,33 @@ def _make_parent(out: Path, option: str) -> Path | None:
 
 
 @contextlib.contextmanager
-def claimed(out, *, overwrite: bool, inputs: Iterable = (), option: str = "--out") -> Iterator[Path]:
-    """Check ``out`` (``check``) and hold the exclusive claim on it for the block (``outputs.claim``: refused at
-    once without ``overwrite`` when another run holds it, else waiting its turn); yields ``out`` resolved. Parents
-    it makes are removed again when the block fails before anything is written there."""
-    out = check(out, overwrite=overwrite, inputs=inputs, option=option)
-    made = _make_parent(out, option)
+def _holding(path: Path, verify, *, overwrite: bool, option: str) -> Iterator[Path]:
+    """Hold the exclusive claim on the checked, resolved ``path`` for the block (``outputs.claim``: refused at once
+    without ``overwrite`` when another run holds it, else waiting its turn), ``verify()`` again once it is ours
+    (the run before may have written it); parents made for it are removed when the block fails before anything
+    is written there."""
+    made = _make_parent(path, option)
     try:
-        with claim(out, wait=overwrite, option=option):
-            check(out, overwrite=overwrite, inputs=inputs, option=option)  # the run before ours may have filled it
-            _HELD.add(out)
+        with claim(path, wait=overwrite, option=option):
+            verify()
+            _HELD.add(path)
             try:
-                yield out
+                yield path
             finally:
-                _HELD.discard(out)
+                _HELD.discard(path)
     except BaseException:
         if made is not None and not any(p.is_file() for p in made.rglob("*")):  # only the folders made here
             shutil.rmtree(made, ignore_errors=True)
         raise
+
+
+def claimed(out, *, overwrite: bool, inputs: Iterable = (), option: str = "--out"):
+    """Check ``out`` (``check``) and hold the exclusive claim on it for the block (a context manager yielding
+    ``out`` resolved): a command that works before it writes takes it first and writes with ``output_folder``
+    inside."""
+    out = check(out, overwrite=overwrite, inputs=inputs, option=option)
+    return _holding(out, lambda: check(out, overwrite=overwrite, inputs=inputs, option=option),
+                    overwrite=overwrite, option=option)
 
 
 @contextlib.contextmanager
@@ -172,27 +181,15 @@ def _check_file(path: Path, *, overwrite: bool, option: str) -> None:
         raise ValueError(f"{option}: expected a new file (or --overwrite), got {path}, which exists")
 
 
-@contextlib.contextmanager
-def claimed_file(path, *, overwrite: bool, option: str = "--out") -> Iterator[Path]:
+def claimed_file(path, *, overwrite: bool, option: str = "--out"):
     """``claimed`` for one file: check ``path`` (an existing one refused without ``overwrite``) and hold the claim
     on it for the block - a command that works before it writes (``tpnet train``) writes it with ``output_file``
     inside. Yields ``path`` resolved."""
     path = _resolve(path, option)
     _parents_are_folders(path, option)
     _check_file(path, overwrite=overwrite, option=option)
-    made = _make_parent(path, option)
-    try:
-        with claim(path, wait=overwrite, option=option):
-            _check_file(path, overwrite=overwrite, option=option)  # the run before ours may have written it
-            _HELD.add(path)
-            try:
-                yield path
-            finally:
-                _HELD.discard(path)
-    except BaseException:
-        if made is not None and not any(p.is_file() for p in made.rglob("*")):  # only the folders made here
-            shutil.rmtree(made, ignore_errors=True)
-        raise
+    return _holding(path, lambda: _check_file(path, overwrite=overwrite, option=option), overwrite=overwrite,
+                    option=option)
 
 
 @contextlib.contextmanager
