@@ -20,6 +20,7 @@ import json
 import os
 import re
 import shutil
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -62,7 +63,7 @@ def _acquire(lock: Path, *, wait: bool, option: str, out: Path) -> int:
                 raise ValueError(f"{option}: {out} is being written by {_holder(lock)}; wait for it to finish "
                                  "or choose another folder") from None
             if not announced and time.monotonic() - start > WAIT_LOG_S:
-                print(f"{option}: waiting for {_holder(lock)}, which is writing {out}", flush=True)
+                print(f"{option}: waiting for {_holder(lock)}, which is writing {out}", file=sys.stderr, flush=True)
                 announced = True
             time.sleep(0.1)
             continue
@@ -78,7 +79,8 @@ def _acquire(lock: Path, *, wait: bool, option: str, out: Path) -> int:
 
 
 def _dead_writers(folder: Path) -> bool:
-    """Whether ``folder`` holds a writer marker whose process is gone (ours, from a claim, or unreadable: gone)."""
+    """Whether ``folder`` holds a writer marker whose process is gone (an unreadable marker counts as gone; this
+    process's own never does)."""
     try:
         pid = int(json.loads((folder / MARKER).read_text())["pid"])
     except FileNotFoundError:
