@@ -80,6 +80,7 @@ class FrameResult:
             same disparity; ``pixels`` elsewhere is the background fill (disparity.md §10). Else None.
         engine: the disparity engine's own ``DisparityResult`` (its tensors valid until the next frame): what
             ``process(frames, previous=...)`` follows on the next frame of a video.
+        cross: the cross-check engine's ``DisparityResult`` (the other camera's view), or None without one.
     """
 
     disparity: torch.Tensor
@@ -95,6 +96,7 @@ class FrameResult:
     checked: torch.Tensor | None = None
     pixels_measured: torch.Tensor | None = None
     engine: DisparityResult | None = None
+    cross: DisparityResult | None = None
 
 
 class Pipeline:
@@ -219,11 +221,15 @@ class Pipeline:
             return None
         return found
 
-    def process(self, frames, previous: DisparityResult | None = None) -> FrameResult:
+    def process(self, frames, previous: FrameResult | DisparityResult | None = None) -> FrameResult:
         """Frames ``(cams, H, W)`` (torch on any device or NumPy, any real dtype; black level subtracted).
-        ``previous``: the engine's result on the frame before (``FrameResult.engine``; a video): the engine
-        follows it instead of searching the whole range (``disparity.follow``; ``stream(follow=True)``)."""
+        ``previous``: the frame before's result (a video): the engines follow it instead of searching the whole
+        range (``disparity.follow``; ``stream(follow=True)``) - a ``FrameResult`` both engines (the
+        cross-check's follows its ``cross``), its ``engine`` (a ``DisparityResult``) the main one only."""
         cfg = self.config
+        previous, self._previous_cross = ((previous.engine, previous.cross) if isinstance(previous, FrameResult)
+                                          else (previous, None))
+        self._cross = None  # the cross-check engine's result, when it runs
         result = self.engine.run(frames, previous)
         measured = torch.isfinite(result.disparity)
         initial = result.disparity
@@ -262,7 +268,7 @@ class Pipeline:
             pixels, _ = per_pixel(staging[self.reference_cam], staging[self.cross_cam], disparity,
                                   offset=self.cross_offset)
             if self.cross_engine is not None:  # the left-right check per pixel, and tiles from its pixels
-                other = self.cross_engine.run(staging)
+                other = self.cross_engine.run(staging, self._previous_cross)
                 back = tuple(-v for v in self.cross_offset)  # the reference camera, seen from the other one
                 other_pixels, _ = per_pixel(staging[self.cross_cam], staging[self.reference_cam], other.disparity,
                                             offset=back)
@@ -277,11 +283,11 @@ class Pipeline:
             confidence = torch.where(keep, confidence, torch.zeros_like(confidence))
             passes += self._cross_passes
         return FrameResult(disparity, confidence, result.two_depth, initial, valid, texture, result.search,
-                           passes, surfaces, pixels, keep, pixels_measured, result)
+                           passes, surfaces, pixels, keep, pixels_measured, result, self._cross)
 
     def _keep(self, disparity: torch.Tensor, confidence: torch.Tensor, other, tiebreak: torch.Tensor) -> torch.Tensor:
         """``(ty, tx)`` bool: the tiles ``PipelineConfig``'s checks and filters keep (see there); sets
-        ``self._cross_passes`` (the cross-check's tile passes, 0 without it). ``other``: the cross-check's
+        ``self._cross_passes`` (the cross-check's tile passes, 0 without it) and ``self._cross`` (its result). ``other``: the cross-check's
         engine result where the per-pixel check ran (its tiles' confidence is their support), else None;
         ``tiebreak``: orders tiles of equal confidence for ``keep_fraction`` (the engine's confidence)."""
         cfg = self.config
@@ -289,13 +295,13 @@ class Pipeline:
         self._cross_passes = 0.0
         size = (self.engine.tp.height, self.engine.tp.width)
         if other is not None:
-            self._cross_passes = other.tile_passes
+            self._cross, self._cross_passes = other, other.tile_passes
             keep = keep & windows_inside(disparity, self.offsets, size) & (confidence >= MIN_SUPPORT)
         elif self.cross_engine is not None:
             # from the frames the engine already staged on the device (not the caller's again: no second host
             # copy and validation; its scale comes out 1)
-            other = self.cross_engine.run(self.engine.tp.staging)
-            self._cross_passes = other.tile_passes
+            other = self.cross_engine.run(self.engine.tp.staging, self._previous_cross)
+            self._cross, self._cross_passes = other, other.tile_passes
             keep = keep & windows_inside(disparity, self.offsets, size) & (
                 cross_difference(disparity, other.disparity, self.cross_offset) <= CROSS_CHECK_PX)
         if cfg.min_confidence > 0:
@@ -309,7 +315,9 @@ class Pipeline:
 
         One result per frame, in order: a frame that ``process`` refuses or fails on (a wrong shape, a bad
         dtype, ...) gives a ``FrameError`` carrying the exception, and the stream goes on with the next frame
-        (whose result is what it would have been without the bad one). Errors of the iterable itself end it.
+        (whose result is what it would have been without the bad one). A reader that could not read a frame
+        may yield the exception in its place (``io.sequence.read_frames``): that frame's ``FrameError``. Errors
+        raised by the iterable itself end it.
         ``follow``: a video - each frame's engine starts from the frame before's answers (``disparity.follow``),
         with the full search on the first frame, every ``follow.REFRESH``-th and the one after a bad frame."""
         previous, since, kept = None, 0, None
@@ -317,22 +325,30 @@ class Pipeline:
             if since >= REFRESH:
                 previous, since = None, 0
             try:
+                if isinstance(item, Exception):
+                    raise item
                 result = self.process(item, previous if follow else None)
             except Exception as exc:  # noqa: BLE001 - one bad frame must not end a camera's stream (issue 16)
                 previous, since = None, 0
                 yield FrameError(index, exc)
                 continue
-            if follow:  # the engine's answers kept past the next frame's run (it reuses its buffers); the copies
-                engine = result.engine  # are made on the first frame and written in place after it
-                tensors = [f.name for f in fields(DisparityResult) if torch.is_tensor(getattr(engine, f.name))]
-                if kept is None:
-                    kept = replace(engine, **{name: getattr(engine, name).clone() for name in tensors})
-                else:
-                    for name in tensors:
-                        getattr(kept, name).copy_(getattr(engine, name))
-                previous = kept
+            if follow:  # the engines' answers kept past the next frame's run (they reuse their buffers)
+                kept = {name: _kept(getattr(result, name), (kept or {}).get(name)) for name in ("engine", "cross")}
+                previous = replace(result, **kept)
             since += 1
             yield result
+
+
+def _kept(result: DisparityResult | None, copy: DisparityResult | None) -> DisparityResult | None:
+    """``result``'s tensors in ``copy`` (written in place), or in a copy made now (the first frame)."""
+    if result is None:
+        return None
+    tensors = [f.name for f in fields(DisparityResult) if torch.is_tensor(getattr(result, f.name))]
+    if copy is None:
+        return replace(result, **{name: getattr(result, name).clone() for name in tensors})
+    for name in tensors:
+        getattr(copy, name).copy_(getattr(result, name))
+    return copy
 
 
 def _most_confident(keep: torch.Tensor, confidence: torch.Tensor, tiebreak: torch.Tensor,

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from tpnet_gpu.cli.common import BACKEND_HELP, DEVICE_HELP, NO_FIGURES_HELP, OVERWRITE_HELP, WEIGHTS_HELP, \
     default, one_shot_threads, pixels, positive_gb
-from tpnet_gpu.io import stereo_io  # light: the images are read on use
+from tpnet_gpu.io import sequence, stereo_io  # light: the images are read on use
 
 # the library's defaults of the options that set how the inputs are read (one default per setting)
 INPUT_DEFAULTS = {name: default(stereo_io.load_inputs, name) for name in ("colour", "reference")}
@@ -36,6 +36,13 @@ def _process(args: argparse.Namespace, step) -> int:
     if max_d is not None and min_d is not None and min_d >= max_d:
         raise ValueError(f"--min-disparity: expected less than --max-disparity {max_d:g}, got {min_d:g}")
     with claimed(args.out, overwrite=args.overwrite, inputs=args.inputs) as out:  # before the work, not after it
+        if sequence.is_sequence(args.inputs):  # one folder of frames per camera: a video (cli/sequence.py)
+            from tpnet_gpu.cli.sequence import process_sequence  # noqa: PLC0415
+
+            return process_sequence(args, step, out, min_d, max_d)
+        if args.no_follow:
+            raise ValueError("--no-follow: only for a video (one folder of frames per camera), got "
+                             f"{len(args.inputs)} input(s) of one frame")
         return _claimed(args, step, out, min_d, max_d)
 
 
@@ -87,7 +94,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
                                       "to the inputs' size (tiles: ceil(size / 8)). See docs/rig_file.md; the "
                                       "output files (depth, points.ply, figures): docs/outputs.md.")
     proc.add_argument("inputs", nargs="+",
-                      help="SCENE_DIR | CAM0 CAM1 CAM2 CAM3 | LEFT RIGHT | one file per rig camera")
+                      help="SCENE_DIR | CAM0 CAM1 CAM2 CAM3 | LEFT RIGHT | one file per rig camera | a video: one "
+                           "folder of frames per camera (LEFT_DIR RIGHT_DIR; frame i = each folder's i-th file)")
     proc.add_argument("--rig", default=None, metavar="FILE",
                       help="rig file (.json/.toml, docs/rig_file.md) or a shipped one: quad, binocular, two_quads")
     proc.add_argument("--max-disparity", default=None, metavar="PX",
@@ -122,6 +130,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
     proc.add_argument("--memory-limit", type=positive_gb, default=None, metavar="GB",
                       help="the budget of the search's range-sized buffers; a frame and range that need more are "
                            "refused before the work (default: 80 %% of the memory available at the start)")
+    proc.add_argument("--no-follow", action="store_true", help="a video: search every frame's whole range "
+                      "(default: each frame starts from the one before's answers and re-searches only lost tiles)")
     proc.add_argument("--per-pixel", action="store_true",
                       help="also depth_px.tif and points_px.ply, one value per pixel (mono stereo pairs)")
     proc.set_defaults(func=run)
