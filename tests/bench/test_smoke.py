@@ -328,11 +328,13 @@ def test_bench_ray(tmp_path, capsys):
     assert "outputs identical in every row" in out and "[bench_ray]" in err
 
 
-def test_bench_video(tmp_path, capsys):
+@pytest.mark.parametrize("pair", [False, True], ids=["quad", "pair"])
+def test_bench_video(tmp_path, capsys, pair):
     from tpnet_gpu.bench.accuracy import bench_video
 
-    argv = ["--sequences", "1", "--frames", "2", "--width", "128", "--height", "96"]
+    argv = ["--sequences", "1", "--frames", "2", "--width", "128", "--height", "96"] + (["--pair"] if pair else [])
     report, out, err = run_bench(bench_video, argv, tmp_path, capsys)
+    assert report["rig"] == ("binocular, mono" if pair else "quad, Bayer")
     assert set(report["summary"]) == {"every frame searched", "following the frame before"}
     assert all(s["frames"] == 1 for s in report["summary"].values())
     followed, searched = (report["summary"][k]["passes"] for k in ("following the frame before",
