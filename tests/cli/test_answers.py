@@ -100,3 +100,16 @@ def test_method_engine_says_so(photo_pair, tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "weights" in err, err
     assert not (tmp_path / "w").exists()
+
+
+def test_no_texture_writes_no_texture_and_the_same_disparity(photo_pair, tmp_path):
+    # the texture pass comes after the disparity (pipeline.process): the maps are bit for bit those with it
+    out, plain = tmp_path / "o", tmp_path / "p"
+    assert main(["process", *photo_pair, "--max-disparity", "12", "--out", str(out), "--no-figures",
+                 "--no-texture"]) == 0
+    assert main(["process", *photo_pair, "--max-disparity", "12", "--out", str(plain), "--no-figures"]) == 0
+    assert not any((out / name).exists() for name in ("texture.tif", "texture.png"))
+    assert (plain / "texture.tif").is_file()
+    np.testing.assert_array_equal(tifffile.imread(out / "disparity.tif"), tifffile.imread(plain / "disparity.tif"))
+    headers = [(f / "points.ply").read_bytes()[:600].decode("ascii", "replace") for f in (out, plain)]
+    assert "property uchar red" not in headers[0] and "property uchar red" in headers[1]

@@ -63,7 +63,8 @@ def _claimed(args: argparse.Namespace, step, out: Path, min_d: float | None, max
                                  device=args.device, backend=args.backend, two_surface=args.two_surface,
                                  cross_check=False if args.no_checks else None, min_confidence=args.min_confidence,
                                  keep_fraction=args.keep_fraction, per_pixel=True if args.per_pixel else None,
-                                 method=args.method, memory_limit_gb=args.memory_limit)
+                                 method=args.method, memory_limit_gb=args.memory_limit,
+                                 textures=not args.no_texture)
         step("frame")
         result = pipeline.process(frames.frames)
     seconds = time.perf_counter() - start
@@ -130,6 +131,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
     proc.add_argument("--memory-limit", type=positive_gb, default=None, metavar="GB",
                       help="the budget of the search's range-sized buffers; a frame and range that need more are "
                            "refused before the work (default: 80 %% of the memory available at the start)")
+    proc.add_argument("--no-texture", action="store_true", help="no texture: no texture.tif / texture.png, "
+                      "points.ply without colours; the frame skips the texture pass (a quarter of a 5 MPix quad "
+                      "frame's time)")
     proc.add_argument("--no-follow", action="store_true", help="a video: search every frame's whole range "
                       "(default: each frame starts from the one before's answers and re-searches only lost tiles)")
     proc.add_argument("--per-pixel", action="store_true",

@@ -46,7 +46,8 @@ def process_sequence(args: argparse.Namespace, step, out: Path, min_d: float | N
                              device=args.device, backend=args.backend, two_surface=args.two_surface,
                              cross_check=False if args.no_checks else None, min_confidence=args.min_confidence,
                              keep_fraction=args.keep_fraction, per_pixel=True if args.per_pixel else None,
-                             method=args.method, memory_limit_gb=args.memory_limit)
+                             method=args.method, memory_limit_gb=args.memory_limit,
+                             textures=not args.no_texture)
     what = frame_outputs.method(pipeline)
     read_inputs = []  # each frame's Inputs (cropping, white level), consumed in step with the stream
 

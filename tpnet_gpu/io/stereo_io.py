@@ -289,8 +289,8 @@ def make_pipeline(inputs: Inputs, *, min_disparity: float | None = None, max_dis
     one; ordinary images (a pair, a rig's images) need it (``ValueError``: their rig's focal length and
     baseline are not known). ``weights`` None: the shipped ones for the rig (``Pipeline``); ``two_surface``:
     also both surfaces of two-surface tiles; ``memory_limit_gb``: ``EngineConfig``'s (None: a share of the memory
-    available); ``answers``: ``PipelineConfig``'s ``cross_check``, ``min_confidence``, ``keep_fraction``,
-    ``per_pixel``, ``method``."""
+    available); ``answers``: ``PipelineConfig``'s ``textures``, ``cross_check``, ``min_confidence``,
+    ``keep_fraction``, ``per_pixel``, ``method``."""
     from tpnet_gpu.config import EngineConfig  # noqa: PLC0415
     from tpnet_gpu.pipeline import Pipeline, PipelineConfig  # noqa: PLC0415 - torch, Warp and the model on use
 
