@@ -1,6 +1,7 @@
 """Per-pixel disparity from tile answers (``tpnet_gpu/disparity/per_pixel.py``). Oracles: a pair built with a
 known per-pixel disparity (a step edge at a known column: the right image's texture moved by the disparity), a
-bilinear ramp's exact samples, and constant / linear tile maps whose blends are known in closed form."""
+bilinear ramp's exact samples, constant / linear tile maps whose blends are known in closed form, and ZNCC
+summed window by window in float64 (NumPy)."""
 
 from __future__ import annotations
 
@@ -74,3 +75,35 @@ def test_blend_of_a_linear_tile_map_is_linear(nan_tile):
     rows = slice(16, 48)
     np.testing.assert_allclose(field[rows, inner], np.broadcast_to(expected[inner], field[rows, inner].shape),
                                atol=1e-5)
+
+
+def _zncc_float64(reference: np.ndarray, moved: np.ndarray, radius: int) -> np.ndarray:
+    """ZNCC of each pixel's (2 radius + 1)^2 window (edge-replicated), summed window by window in float64; -1 where
+    the moved window holds NaN; the denominator floored as ``per_pixel`` floors it (1e-6 of the image's variance)."""
+    k = 2 * radius + 1
+    ref = np.lib.stride_tricks.sliding_window_view(np.pad(reference, radius, mode="edge"), (k, k))
+    mov = np.lib.stride_tricks.sliding_window_view(np.pad(moved, radius, mode="edge"), (k, k))
+    rc = ref - ref.mean(axis=(-2, -1), keepdims=True)
+    with np.errstate(invalid="ignore"):
+        mc = mov - mov.mean(axis=(-2, -1), keepdims=True)
+        cov = (rc * mc).mean(axis=(-2, -1))
+        denom = np.sqrt(rc.var(axis=(-2, -1)) * mc.var(axis=(-2, -1)))
+    z = cov / np.maximum(denom, 1e-6 * reference.var() + 1e-12)
+    return np.where(np.isnan(mov).any(axis=(-2, -1)), -1.0, z)
+
+
+@pytest.mark.parametrize("level", [0.0, 1000.0])
+def test_zncc_matches_window_sums_in_float64(level):
+    # one integer disparity for every tile: every candidate is the same shift, so the returned ZNCC is that
+    # shift's; a bright image (level 1000, contrast 10) is where float32 running sums would lose the windows
+    rng = np.random.default_rng(3)
+    h, w, d = 48, 96, 5
+    right = gaussian_filter(rng.normal(size=(h, w)), 1.0) * 10 + level
+    left = np.roll(right, d, axis=1) + rng.normal(scale=0.5, size=(h, w))
+    moved = np.full((h, w), np.nan)
+    moved[:, d:] = right[:, :-d]  # right[y, x - d]; NaN where that leaves the image
+    tiles = torch.full((h // 8, w // 8), float(d))
+    _, z = per_pixel(torch.tensor(left, dtype=torch.float32), torch.tensor(right, dtype=torch.float32), tiles)
+    expected = _zncc_float64(left, moved, RADIUS)
+    assert (expected[:, : d + RADIUS] == -1).all() and (expected[:, d + RADIUS:] > 0.5).mean() > 0.95
+    np.testing.assert_allclose(z.numpy(), expected, atol=2e-5)

@@ -25,11 +25,16 @@ MIN_ZNCC = 0.3  # a pixel whose best candidate correlates less has no value
 FLAT_VARIANCE = 1e-6  # relative to the image's variance: a window this flat has no ZNCC (it is 0 there)
 
 
-def _box(image: torch.Tensor, radius: int) -> torch.Tensor:
-    """``(h, w)`` mean over the (2 radius + 1)^2 window (edge-replicated)."""
+def _box(images: torch.Tensor, radius: int) -> torch.Tensor:
+    """``(n, h, w)`` means of ``images (n, h, w)`` over each pixel's (2 radius + 1)^2 window (edge-replicated), as
+    differences of running sums along each axis: 2.8x faster than ``avg_pool2d`` for a 7x7 window on 4 VGA
+    images. Float32 running sums lose ~1e-7 of a row's sum: the caller centres its images (``per_pixel``)."""
     k = 2 * radius + 1
-    padded = F.pad(image[None, None], (radius,) * 4, mode="replicate")
-    return F.avg_pool2d(padded, k, stride=1)[0, 0]
+    padded = F.pad(images[:, None], (radius,) * 4, mode="replicate")[:, 0]
+    rows = F.pad(padded.cumsum(-1), (1, 0))
+    rows = rows[..., k:] - rows[..., :-k]
+    cols = F.pad(rows.cumsum(-2), (0, 0, 1, 0))
+    return (cols[..., k:, :] - cols[..., :-k, :]) / (k * k)
 
 
 def cell_field(tiles: torch.Tensor, shape: tuple[int, int], dy: int, dx: int) -> torch.Tensor:
@@ -82,21 +87,22 @@ class _Windows:
     def __init__(self, reference: torch.Tensor, radius: int):
         self.radius = radius
         self.ref = reference
-        self.mean = _box(reference, radius)
-        self.var = (_box(reference * reference, radius) - self.mean ** 2).clamp_min(0)
+        self.mean, square = _box(torch.stack([reference, reference * reference]), radius)
+        self.var = (square - self.mean ** 2).clamp_min(0)
         self.floor = FLAT_VARIANCE * float(reference.var()) + 1e-12
 
     def zncc(self, moved: torch.Tensor) -> torch.Tensor:
         """``(h, w)`` ZNCC of the reference with ``moved`` over each pixel's window; -1 where ``moved`` has NaN
         in the window."""
-        missing = _box(torch.isnan(moved).to(moved.dtype), self.radius) > 0
         m = torch.nan_to_num(moved, nan=0.0)
-        mean = _box(m, self.radius)
-        var = (_box(m * m, self.radius) - mean ** 2).clamp_min(0)
-        cov = _box(self.ref * m, self.radius) - self.mean * mean
+        # one pass over the four window sums (the NaN count is exact: small integers)
+        nans, mean, square, cross = _box(torch.stack([torch.isnan(moved).to(m.dtype), m, m * m, self.ref * m]),
+                                         self.radius)
+        var = (square - mean ** 2).clamp_min(0)
+        cov = cross - self.mean * mean
         denom = torch.sqrt(self.var * var).clamp_min(self.floor)
         z = cov / denom
-        return torch.where(missing, torch.full_like(z, -1.0), z)
+        return torch.where(nans > 0.5 / (2 * self.radius + 1) ** 2, torch.full_like(z, -1.0), z)
 
 
 def per_pixel(reference: torch.Tensor, other: torch.Tensor, tiles: torch.Tensor, *, offset=(1.0, 0.0),
@@ -106,8 +112,9 @@ def per_pixel(reference: torch.Tensor, other: torch.Tensor, tiles: torch.Tensor,
 
     Returns ``(disparity, zncc)``, each ``(h, w)`` float32: the chosen answer (NaN where no candidate reached
     ``min_zncc`` or all were NaN) and its ZNCC (-1 where none)."""
-    reference = reference.float()
-    other = other.float()
+    level = reference.float().mean()  # both centred on it: ZNCC ignores offsets, and the window sums keep
+    reference = reference.float() - level  # their precision (``_box``)
+    other = other.float() - level
     tiles = tiles.float()
     shape = tuple(reference.shape)
     windows = _Windows(reference, radius)
