@@ -103,4 +103,3 @@ def test_no_follow_on_one_frame_is_refused(tmp_path, capsys):
         paths.append(str(tmp_path / name))
     assert main(["process", *paths, "--max-disparity", "4", "--out", str(tmp_path / "o"), "--no-follow"]) == 2
     assert "--no-follow: only for a video" in capsys.readouterr().err
-
