@@ -21,7 +21,7 @@ def test_the_quick_campaign_finds_nothing(tmp_path):
                            "--json", str(tmp_path / "hostile.json")], capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
     assert "No case misbehaves." in done.stdout
-    for cls in ("outputs", "crafted rigs", "option bounds", "file doors"):
+    for cls in ("outputs", "crafted rigs", "option bounds", "file doors", "video"):
         assert f"| {cls} |" in done.stdout
 
 

@@ -1,12 +1,14 @@
 """The hostile-user campaign against an installed ``tpnet`` (issue 40 item 6): cases by class (``cases.py``:
-output folders, crafted rigs, numeric option bounds, every file-reading door given special or crafted files),
+output folders, crafted rigs, numeric option bounds, every file-reading door given special or crafted files, a
+video with a bad frame),
 each run as a black box in its own folder; a table by class, the cases that misbehave, and JSON.
 
     python tools/hostile/campaign.py [--tpnet "tpnet"] [--quick] [--json out/hostile.json] [--work DIR]
 
 Standard library only: it never imports the project it judges (``--tpnet`` is the command line to run, e.g. "python
 -m tpnet_gpu.cli" of another checkout). A case behaves when: it ends within ``--timeout`` s; no traceback or
-RuntimeWarning; its exit is the expected one (2 = refused, with exactly one ``tpnet CMD: error:`` line); no crafted
+RuntimeWarning; its exit is the expected one (2 = refused, with exactly one ``tpnet CMD: error:`` line; 1 = a
+video's bad frame, named on its own line, the other frames written with ``sequence.json``); no crafted
 pickle's payload ran; nothing ``.tmp-*`` / ``.old-*`` is left in its folder. Two writers of one ``--out``: exactly
 one exits 0 and the folder holds its whole output. A writer killed by SIGKILL mid-run: the next run into the same
 folder exits 0 and leaves nothing of the killed one. tests/tools/test_hostile_campaign.py runs ``--quick`` in CI.
@@ -76,6 +78,8 @@ def _problems(code: int | None, err: str, expect: str, names: str | None = None)
     spellings = [] if not names else [names, names.lstrip("-").replace("-", "_")]  # the option, or its field
     if code == 2 and spellings and not any(n in last for n in spellings):
         found.append(f"refused for another reason: {last[:160]}")
+    if code == 1 and names and names not in err:  # a video's bad frame: its own line, the video goes on
+        found.append(f"exit 1 without a line naming {names!r}")
     return found
 
 
@@ -112,7 +116,9 @@ def run_case(case: Case, tpnet: list[str], folder: Path, timeout: float) -> dict
     else:
         code, err = _finish(_start(tpnet, argv), timeout)
         problems += _problems(code, err, case.expect, case.names)
-        if code != 0:
+        if code == 1 and not (folder / "o" / "sequence.json").is_file():  # a video with a bad frame
+            problems.append("a video's bad frame, but no sequence.json for the others")
+        elif code not in (0, 1):
             problems += [f"refused, but wrote {made}" for made in ("o", "n.onnx") if (folder / made).exists()]
     if case.marker and (folder / case.marker).exists():
         problems.append("a crafted pickle's payload ran")

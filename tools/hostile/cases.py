@@ -222,8 +222,46 @@ def outputs(quick: bool = False) -> list[Case]:
     return out
 
 
+def _video(d: Path, frames: int = 3) -> None:
+    """``d/left`` and ``d/right``, ``frames`` valid frames each (0000.png, ...)."""
+    for side, shift in (("left", 4), ("right", 0)):
+        (d / side).mkdir(parents=True)
+        for k in range(frames):
+            png(d / side / f"{k:04d}.png", shift=shift + k % 2)
+
+
+def video() -> list[Case]:
+    """A video (one folder of frames per camera) with a frame that no frame is, or folders that do not pair up:
+    the bad frame is one ``frame N (...)`` line and exit 1 with the others written; folders, a refusal."""
+    argv = ["process", "{d}/left", "{d}/right", "--max-disparity", "8", "--out", "{d}/o", "--no-figures"]
+    cases = []
+    for label, make in _kinds("0001.png"):
+        if label in ("missing", "folder"):  # a folder named 0001.png is no frame: the counts then differ
+            continue
+
+        def setup(d, make=make):
+            _video(d)
+            (d / "right" / "0001.png").unlink()
+            make(d / "right")
+            (d / "right" / "whole.png").unlink(missing_ok=True)  # "truncated"'s source: not a frame of the video
+        cases.append(Case("video", f"frame 1 of 3: {label}", argv, "1", setup, marker="pwned", names="frame 1 ("))
+
+    def other_size(d):
+        _video(d)
+        png(d / "right" / "0001.png", width=72)
+    cases.append(Case("video", "frame 1 of 3: another size", argv, "1", other_size, names="frame 1 ("))
+
+    def counts(d):
+        _video(d)
+        (d / "right" / "0002.png").unlink()
+    cases.append(Case("video", "folders of 3 and 2 frames", argv, "2", counts, names="inputs"))
+    cases.append(Case("video", "an empty camera folder", argv, "2",
+                      lambda d: _video(d, 0) or None, names="inputs"))
+    return cases
+
+
 def all_cases(quick: bool = False) -> list[Case]:
-    cases = outputs(quick) + crafted_rigs() + option_bounds(quick) + file_doors()
+    cases = outputs(quick) + crafted_rigs() + option_bounds(quick) + file_doors() + video()
     if quick:  # a slice of every class
         cases = [c for i, c in enumerate(cases) if c.cls in ("outputs", "option bounds") or i % 4 == 0]
     return cases
