@@ -13,6 +13,10 @@ BACKENDS = ("warp", "taichi")  # the tile processor's kernel languages
 # A frame of at most this many pixels is start-up bound (docs/platform.md §4): the Warp backend starts ~1 CPU-second
 # sooner than Taichi and runs such a frame as fast, so it is the default there (TileProcessor).
 SMALL_FRAME_PIXELS = 320 * 240
+# `tpnet process` on one frame of at most this many pixels runs on Warp: the process ends after that frame, and
+# Taichi's front end and kernel loading (~2 s) outweigh its faster frame up to about here (docs/platform.md §4:
+# a 640x480 pair one-shot 4.6 s on Warp against 6.2 s on Taichi; 1280x960 11.1 against 9.4 s)
+ONE_SHOT_PIXELS = 640 * 480
 METHODS = ("auto", "tpnet", "engine")  # what makes the disparity: PipelineConfig.method, `tpnet process --method`
 MEASURES = ("lma", "axis")  # the disparity engine's per-tile measurements
 NEAR_DRAWS = 2  # "near" training targets per scene (ground truth + a small log-uniform offset)

@@ -145,20 +145,24 @@ def test_process_pair_through_the_engine_crops_to_the_image(tmp_path, engine, ca
 
 def test_one_shot_threads_follow_the_frame_size_and_the_backend_is_passed(tmp_path, engine):
     # docs/platform.md §4: a frame of at most SMALL_FRAME_PIXELS (320x240) runs with torch on one thread, a larger
-    # one as set; the CLI passes --backend as given (None: the library's choice, tested in test_processor.py);
+    # one as set; one frame of at most ONE_SHOT_PIXELS (640x480) runs on Warp (its start-up is the shorter), a
+    # larger one on the library's choice (None, tested in test_processor.py); --backend is passed as given;
     # torch's count is restored.
-    from tpnet_gpu.config import SMALL_FRAME_PIXELS
+    from tpnet_gpu.config import ONE_SHOT_PIXELS, SMALL_FRAME_PIXELS
 
-    assert SMALL_FRAME_PIXELS == 320 * 240
+    assert (SMALL_FRAME_PIXELS, ONE_SHOT_PIXELS) == (320 * 240, 640 * 480)
     threads = torch.get_num_threads()
-    (tmp_path / "big").mkdir()
+    for name in ("big", "vga", "larger"):
+        (tmp_path / name).mkdir()
     small, big = _pair(tmp_path, (240, 320)), _pair(tmp_path / "big", (240, 328))
-    for images, backend in ((small, []), (big, []), (small, ["--backend", "taichi"])):
+    vga, larger = _pair(tmp_path / "vga", (480, 640)), _pair(tmp_path / "larger", (480, 648))
+    for images, backend in ((small, []), (big, []), (small, ["--backend", "taichi"]), (vga, []), (larger, [])):
         assert main(["process", *images, "--max-disparity", "4", "--out", str(tmp_path / "o"), "--overwrite",
                      "--no-figures", *backend]) == 0
-    assert [(c["height"] * c["width"], c["backend"]) for c in engine] == [(76800, None), (78720, None),
-                                                                          (76800, "taichi")]
-    assert [c["torch_threads"] for c in engine] == [1, threads, 1] and torch.get_num_threads() == threads
+    assert [(c["height"] * c["width"], c["backend"]) for c in engine] == [
+        (76800, "warp"), (78720, "warp"), (76800, "taichi"), (307200, "warp"), (311040, None)]
+    assert [c["torch_threads"] for c in engine] == [1, threads, 1, threads, threads]
+    assert torch.get_num_threads() == threads
 
 
 def test_process_rig_of_images_through_the_engine(tmp_path, engine):

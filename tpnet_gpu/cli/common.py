@@ -8,10 +8,13 @@ import contextlib
 import inspect
 import math
 
-from tpnet_gpu.config import SMALL_FRAME_PIXELS
+from tpnet_gpu.config import ONE_SHOT_PIXELS, SMALL_FRAME_PIXELS
 
 BACKEND_HELP = (f"tile-processor kernels (default: warp for frames of at most {SMALL_FRAME_PIXELS} pixels, whose "
                 "start-up dominates, and on CUDA; else taichi)")
+ONE_SHOT_BACKEND_HELP = (f"tile-processor kernels (default: warp for one frame of at most {ONE_SHOT_PIXELS} pixels, "
+                         "whose start-up dominates, and on CUDA; else taichi - for a video, warp up to "
+                         f"{SMALL_FRAME_PIXELS})")
 DEVICE_HELP = "cpu or cuda (default: cuda when present)"
 OVERWRITE_HELP = "replace the files of a non-empty output folder (default: refuse it)"
 WEIGHTS_HELP = ("TPNET weights from `tpnet train` (default: the shipped ones for the rig); weights trained for another "
@@ -64,3 +67,11 @@ def one_shot_threads(height: int, width: int):
         yield
     finally:
         torch.set_num_threads(threads)
+
+
+def one_shot_backend(backend: str | None, height: int, width: int) -> str | None:
+    """``backend`` as given, else "warp" for one frame of at most ``ONE_SHOT_PIXELS`` pixels (the process ends
+    after it: start-up dominates), else None (the library's choice)."""
+    if backend is not None or height * width > ONE_SHOT_PIXELS:
+        return backend
+    return "warp"

@@ -9,8 +9,8 @@ import logging
 import time
 from pathlib import Path
 
-from tpnet_gpu.cli.common import BACKEND_HELP, DEVICE_HELP, NO_FIGURES_HELP, OVERWRITE_HELP, WEIGHTS_HELP, \
-    default, one_shot_threads, pixels, positive_gb
+from tpnet_gpu.cli.common import DEVICE_HELP, NO_FIGURES_HELP, ONE_SHOT_BACKEND_HELP, OVERWRITE_HELP, \
+    WEIGHTS_HELP, default, one_shot_backend, one_shot_threads, pixels, positive_gb
 from tpnet_gpu.io import sequence, stereo_io  # light: the images are read on use
 
 # the library's defaults of the options that set how the inputs are read (one default per setting)
@@ -60,7 +60,8 @@ def _claimed(args: argparse.Namespace, step, out: Path, min_d: float | None, max
     start = time.perf_counter()
     with one_shot_threads(height, width):
         pipeline = make_pipeline(inputs, min_disparity=min_d, max_disparity=max_d, weights=args.weights,
-                                 device=args.device, backend=args.backend, two_surface=args.two_surface,
+                                 device=args.device, backend=one_shot_backend(args.backend, height, width),
+                                 two_surface=args.two_surface,
                                  cross_check=False if args.no_checks else None, min_confidence=args.min_confidence,
                                  keep_fraction=args.keep_fraction, per_pixel=True if args.per_pixel else None,
                                  method=args.method, memory_limit_gb=args.memory_limit,
@@ -112,7 +113,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
     proc.add_argument("--cfa", default=None, help="Bayer pattern of TIFF mosaics (e.g. GRBG); without it TIFFs of a "
                       "rig are read as ordinary images")
     proc.add_argument("--device", default=None, help=DEVICE_HELP)
-    proc.add_argument("--backend", choices=BACKENDS, default=None, help=BACKEND_HELP)
+    proc.add_argument("--backend", choices=BACKENDS, default=None, help=ONE_SHOT_BACKEND_HELP)
     proc.add_argument("--weights", default=None, metavar="FILE", help=WEIGHTS_HELP)
     proc.add_argument("--method", choices=METHODS, default=PipelineConfig.method,
                       help="auto: the disparity engine, then TPNET where weights shipped for default use fit the rig "
