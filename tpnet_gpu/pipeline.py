@@ -287,8 +287,9 @@ class Pipeline:
 
     def _keep(self, disparity: torch.Tensor, confidence: torch.Tensor, other, tiebreak: torch.Tensor) -> torch.Tensor:
         """``(ty, tx)`` bool: the tiles ``PipelineConfig``'s checks and filters keep (see there); sets
-        ``self._cross_passes`` (the cross-check's tile passes, 0 without it) and ``self._cross`` (its result). ``other``: the cross-check's
-        engine result where the per-pixel check ran (its tiles' confidence is their support), else None;
+        ``self._cross_passes`` (the cross-check's tile passes, 0 without it) and ``self._cross`` (its result).
+        ``other``: the cross-check's engine result where the per-pixel check ran (its tiles' confidence is their
+        support), else None;
         ``tiebreak``: orders tiles of equal confidence for ``keep_fraction`` (the engine's confidence)."""
         cfg = self.config
         keep = torch.isfinite(disparity)

@@ -105,11 +105,13 @@ def main(argv=None) -> dict:
         s = summary[name]
         rows.append([name, str(s["frames"]), f"{s['passes']:.2f}", f"{100 * s['gross']:.2f} %",
                      f"{s['rmse_inliers']:.4f}", f"{100 * s['coverage']:.1f} %", f"{s['seconds']:.2f}"])
-    table = [f"Video ({'mono pair' if args.pair else 'Bayer quad'}): {args.sequences} moving sequences of {args.frames} frames, {args.width}x{args.height} (seeds "
-             f"{args.seed}+; step {args.step_mm:g} mm), the frames after each first", ""] + \
+    kind = "mono pair" if args.pair else "Bayer quad"
+    table = [f"Video ({kind}): {args.sequences} moving sequences of {args.frames} frames, {args.width}x{args.height} "
+             f"(seeds {args.seed}+; step {args.step_mm:g} mm), the frames after each first", ""] + \
         common.format_table(header, rows)
     print("\n".join(table))
-    report = {"bench": "video", "rig": "binocular, mono" if args.pair else "quad, Bayer", "sequences": args.sequences, "frames": args.frames, "width": args.width,
+    report = {"bench": "video", "rig": "binocular, mono" if args.pair else "quad, Bayer",
+              "sequences": args.sequences, "frames": args.frames, "width": args.width,
               "height": args.height, "seed": args.seed, "step_mm": args.step_mm, "summary": summary,
               "per_frame": per, "machine": common.machine_info(), "table": table}
     if args.json:

@@ -1,4 +1,5 @@
-"""A video as ``tpnet process`` reads it: one folder per camera, each holding that camera's frames (docs/outputs.md §5).
+"""A video as ``tpnet process`` reads it: one folder per camera, each holding that camera's frames
+(docs/outputs.md §5).
 
 Frame ``i`` is the ``i``-th file of every folder in name order (``left/0001.png`` with ``right/0001.png``), read
 as ``load_inputs`` reads one frame's files (ordinary images or raw files, with the rig given or the pair's
