@@ -103,3 +103,16 @@ def test_no_follow_on_one_frame_is_refused(tmp_path, capsys):
         paths.append(str(tmp_path / name))
     assert main(["process", *paths, "--max-disparity", "4", "--out", str(tmp_path / "o"), "--no-follow"]) == 2
     assert "--no-follow: only for a video" in capsys.readouterr().err
+
+
+def test_a_video_writes_what_one_frame_writes(video, tmp_path):
+    # every option of one frame reaches each frame of a video: the same files as `tpnet process LEFT RIGHT`
+    options = ["--max-disparity", "12", "--no-figures", "--two-surface", "--per-pixel", "--no-texture"]
+    one, out = tmp_path / "one", tmp_path / "video"
+    left, right = (sorted(__import__("pathlib").Path(v).glob("*.png"))[0] for v in video)
+    assert main(["process", str(left), str(right), "--out", str(one), *options]) == 0
+    assert main(["process", *video, "--out", str(out), *options]) == 0
+    expected = sorted(p.name for p in one.iterdir())
+    assert "foreground.tif" in expected and "depth_px.tif" in expected and "texture.tif" not in expected
+    for k in range(len(SHIFTS)):
+        assert sorted(p.name for p in (out / f"frame_{k:05d}").iterdir()) == expected, k

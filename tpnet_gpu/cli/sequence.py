@@ -77,6 +77,8 @@ def process_sequence(args: argparse.Namespace, step, out: Path, min_d: float | N
                 sub.mkdir()
                 frame_outputs.write(sub, maps, scene=f"frame {index}", what=what, figures=not args.no_figures,
                                     per_pixel=args.per_pixel)
+                if args.two_surface:  # NaN where the tile shows one surface, as for one frame
+                    frame_outputs.write_surfaces(sub, result.surfaces, inputs.frames)
                 record.update(folder=sub.name, tile_passes=round(float(result.tile_passes), 3))
             records.append(record)
             start = time.perf_counter()
