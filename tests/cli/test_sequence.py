@@ -116,3 +116,9 @@ def test_a_video_writes_what_one_frame_writes(video, tmp_path):
     assert "foreground.tif" in expected and "depth_px.tif" in expected and "texture.tif" not in expected
     for k in range(len(SHIFTS)):
         assert sorted(p.name for p in (out / f"frame_{k:05d}").iterdir()) == expected, k
+
+
+def test_a_video_on_ray_is_refused_before_ray_starts(video, tmp_path, capsys):
+    assert main(["process", *video, "--max-disparity", "12", "--out", str(tmp_path / "o"), "--ray"]) == 2
+    err = capsys.readouterr().err
+    assert "--ray: processes scene folders" in err and "Traceback" not in err and not (tmp_path / "o").exists()

@@ -19,6 +19,9 @@ INPUT_DEFAULTS = {name: default(stereo_io.load_inputs, name) for name in ("colou
 
 def run(args: argparse.Namespace) -> int:
     if args.ray or args.address is not None or args.workers is not None:  # scene folders on Ray (cli/ray.py)
+        if sequence.is_sequence(args.inputs):  # before Ray starts: each folder would fail as a scene
+            raise ValueError("--ray: processes scene folders (each with its scene.json); these folders have none - a "
+                             "video (one folder of frames per camera) runs without --ray")
         from tpnet_gpu.cli.ray import process_scenes  # noqa: PLC0415
 
         return process_scenes(args)
