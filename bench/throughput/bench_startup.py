@@ -1,11 +1,13 @@
 """Start-up benchmark: a one-shot ``tpnet process`` of a small rendered scene, each in a fresh process.
 
     tpnet bench startup [--sizes 128x96 640x480] [--backends default taichi warp] [--repeat 3] [--cache DIR]
-                        [--json out/bench_startup.json]
+                        [--pair] [--json out/bench_startup.json]
     python -m tpnet_gpu.bench.throughput.bench_startup [same options]
 
-Per frame size a demo scene is rendered once (supersample 1, ``tpnet render``). Per size and backend, ``tpnet
-process SCENE --device cpu [--backend B]`` (backend "default": no ``--backend``, the command's own choice) runs
+Per frame size a demo scene is rendered once (supersample 1, ``tpnet render``) - or with ``--pair`` a mono stereo
+pair as PNG images (``rendered_pairs``' real-like case, processed as ``tpnet process LEFT RIGHT --max-disparity
+64``, at most a quarter of the width: the cross-check and the per-pixel step). Per size and backend, ``tpnet
+process INPUTS --device cpu [--backend B]`` (backend "default": no ``--backend``, the command's own choice) runs
 in a fresh Python process: first with an empty kernel cache (the cold row: Taichi's offline cache and Warp's
 kernel cache both in a new temporary folder, ``TPNET_CACHE_DIR`` and ``WARP_CACHE_PATH``), then ``--repeat``
 times with that cache (the warm row: median and best). With ``--cache DIR`` the processes share DIR instead (no
@@ -68,13 +70,13 @@ def timed_child(command: list[str], env: dict) -> tuple[float, float, str]:
     return seconds, cpu, done.stdout
 
 
-def process_once(scene: Path, tmp: Path, backend: str, root: Path) -> dict:
+def process_once(inputs: list, tmp: Path, backend: str, root: Path) -> dict:
     """One ``tpnet process`` in a fresh process over the caches under ``root``, into a new output folder under
     ``tmp`` (the command refuses one that holds files): wall and reported seconds, and the kernels it added to
     the caches."""
     before = cache_entries(root)
     out = Path(tempfile.mkdtemp(prefix="out-", dir=tmp))
-    command = [sys.executable, "-m", "tpnet_gpu.cli", "process", str(scene), "--out", str(out), "--device", "cpu",
+    command = [sys.executable, "-m", "tpnet_gpu.cli", "process", *inputs, "--out", str(out), "--device", "cpu",
                "--no-figures", *([] if backend == "default" else ["--backend", backend])]  # start-up, not plots
     wall, cpu, stdout = timed_child(command, cache_env(root))
     reported = _REPORTED.search(stdout)
@@ -82,6 +84,27 @@ def process_once(scene: Path, tmp: Path, backend: str, root: Path) -> dict:
         raise RuntimeError(f"tpnet process printed no time: {stdout!r}")
     return {"wall_s": wall, "cpu_s": cpu, "reported_s": float(reported.group(1)),
             "new_kernels": cache_entries(root) - before}
+
+
+def _inputs(tmp: Path, width: int, height: int, pair: bool) -> list[str]:
+    """The ``tpnet process`` inputs of one size, rendered into ``tmp``: a quad scene folder, or a pair's images and
+    its range (``--pair``)."""
+    if pair:
+        from tpnet_gpu.bench.accuracy.rendered_pairs import MAX_DISPARITY, write_suite  # noqa: PLC0415
+
+        (folder,) = write_suite(tmp / f"pair-{width}x{height}", cases=("real-like",), size=(width, height),
+                                supersample=1)
+        reach = min(MAX_DISPARITY, width // 4)  # a tiny smoke-test frame cannot hold the suite's 64 px
+        return [str(folder / "left.png"), str(folder / "right.png"), "--max-disparity", f"{reach:g}"]
+    from tpnet_gpu import cli  # noqa: PLC0415 - the renderer, in this process
+
+    scene = tmp / f"scene-{width}x{height}"
+    with contextlib.redirect_stdout(sys.stderr):  # its one-line summary is progress, not the table
+        rendered = cli.main(["render", str(scene), "--width", str(width), "--height", str(height), "--supersample",
+                             "1"])
+    if rendered != 0:
+        raise SystemExit(f"could not render a {width}x{height} scene")
+    return [str(scene)]
 
 
 def _row(runs: list[dict]) -> dict:
@@ -96,6 +119,8 @@ def main(argv=None) -> dict:
     parser.add_argument("--repeat", type=int, default=3, help="warm runs per size and backend (default 3)")
     parser.add_argument("--cache", default=None, metavar="DIR",
                         help="kernel cache root shared by every run (default: a new one per backend, cold first)")
+    parser.add_argument("--pair", action="store_true", help="a rendered mono stereo pair of PNG images instead of a "
+                        "quad scene folder")
     parser.add_argument("--json", default="out/bench_startup.json", help="report file")
     args = parser.parse_args(argv)
     if args.repeat < 1:
@@ -105,29 +130,23 @@ def main(argv=None) -> dict:
     except ValueError as error:
         parser.error(str(error))
 
-    from tpnet_gpu import cli  # noqa: PLC0415 - the renderer, in this process
-
-    report = {"bench": "startup", "sizes": [], "machine": common.machine_info(), "cache": args.cache}
+    report = {"bench": "startup", "inputs": "mono pair" if args.pair else "quad scene", "sizes": [],
+              "machine": common.machine_info(), "cache": args.cache}
     with tempfile.TemporaryDirectory(prefix="tpnet-startup-") as tmp:
         tmp = Path(tmp)
         floor = [timed_child([sys.executable, "-c", IMPORT_FLOOR], os.environ.copy()) for _ in range(args.repeat)]
         report["import_floor"] = {"wall_s": summary([f[0] for f in floor]), "cpu_s": summary([f[1] for f in floor])}
         log(f"import floor ({IMPORT_FLOOR}): median {report['import_floor']['wall_s']['median']:.2f} s")
         for width, height in sizes:
-            scene = tmp / f"scene-{width}x{height}"
-            with contextlib.redirect_stdout(sys.stderr):  # its one-line summary is progress, not the table
-                rendered = cli.main(["render", str(scene), "--width", str(width), "--height", str(height),
-                                     "--supersample", "1"])
-            if rendered != 0:
-                raise SystemExit(f"could not render a {width}x{height} scene")
+            inputs = _inputs(tmp, width, height, args.pair)
             entry = {"width": width, "height": height, "backends": {}}
             for backend in args.backends:
                 root = Path(args.cache) if args.cache else tmp / f"cache-{width}x{height}-{backend}"
                 rows = {}
                 if not args.cache:
-                    rows["cold"] = _row([process_once(scene, tmp, backend, root)])
+                    rows["cold"] = _row([process_once(inputs, tmp, backend, root)])
                     log(f"{width}x{height} {backend} cold: {rows['cold']['wall_s']['median']:.2f} s")
-                warm = [process_once(scene, tmp, backend, root) for _ in range(args.repeat)]
+                warm = [process_once(inputs, tmp, backend, root) for _ in range(args.repeat)]
                 rows["warm"] = _row(warm)
                 log(f"{width}x{height} {backend} warm: median {rows['warm']['wall_s']['median']:.2f} s")
                 entry["backends"][backend] = rows
