@@ -19,10 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from tpnet_gpu.io.stereo_io import IMAGE_SUFFIXES, TIFF_SUFFIXES
+from tpnet_gpu.io.sequence import frames_in
 
 HELP = "per-tile motion vectors between frames: A B (scene folders, raw files or images) or a sequence folder"
-RAW_SUFFIXES = (".dng", ".cr2", ".nef", ".arw", ".raw")
 
 
 def sequence(inputs: list[str]) -> list[Path]:
@@ -36,9 +35,7 @@ def sequence(inputs: list[str]) -> list[Path]:
     if (folder / "scene.json").exists():
         raise ValueError(f"inputs: {folder} is one scene folder (one frame); give two frames or a sequence folder")
     scenes = sorted(p for p in folder.iterdir() if p.is_dir() and (p / "scene.json").exists())
-    suffixes = IMAGE_SUFFIXES + TIFF_SUFFIXES + RAW_SUFFIXES
-    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in suffixes)
-    frames = scenes or files
+    frames = scenes or frames_in(folder)
     if len(frames) < 2:
         raise ValueError(f"inputs: expected a sequence folder of at least 2 scene folders or raw/image files, got "
                          f"{len(frames)} in {folder}")

@@ -27,9 +27,16 @@ def is_sequence(paths) -> bool:
     return len(paths) >= 2 and all(p.is_dir() and not (p / "scene.json").exists() for p in paths)
 
 
+def frames_in(folder: Path) -> list[Path]:
+    """The frame files of ``folder`` in name order: entries with a ``FRAME_SUFFIXES`` suffix (case-insensitive),
+    hidden ones and folders left out (a FIFO or a link is kept: reading it says what it is)."""
+    return sorted(p for p in Path(folder).iterdir() if not p.name.startswith(".")
+                  and p.suffix.lower() in FRAME_SUFFIXES and not p.is_dir())
+
+
 def frame_files(folders) -> list[tuple[Path, ...]]:
-    """``[(cam0_file, cam1_file, ...), ...]``: frame ``i`` is the ``i``-th frame file of each folder in name
-    order (``FRAME_SUFFIXES``, case-insensitive; hidden files skipped).
+    """``[(cam0_file, cam1_file, ...), ...]``: frame ``i`` is the ``i``-th frame file of each folder
+    (``frames_in``).
 
     Raises:
         ValueError: a folder holds no frame file, or the folders hold different numbers of them (naming each
@@ -38,8 +45,7 @@ def frame_files(folders) -> list[tuple[Path, ...]]:
     folders = [Path(f) for f in folders]
     lists = []
     for folder in folders:
-        files = sorted(p for p in folder.iterdir() if not p.name.startswith(".")
-                       and p.suffix.lower() in FRAME_SUFFIXES and not p.is_dir())
+        files = frames_in(folder)
         if not files:
             raise ValueError(f"inputs: expected frame files ({', '.join(s for s in FRAME_SUFFIXES[:4])}, ...) in "
                              f"the camera folder {folder}, got none")
