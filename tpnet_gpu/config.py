@@ -22,6 +22,15 @@ MEASURES = ("lma", "axis")  # the disparity engine's per-tile measurements
 NEAR_DRAWS = 2  # "near" training targets per scene (ground truth + a small log-uniform offset)
 
 
+def _integers(settings, **lows: int) -> None:
+    """A ``ValueError`` naming the first of ``settings``' fields ``lows`` that is not an int (bool excluded) in
+    [low, 2**63)."""
+    for name, low in lows.items():
+        value = getattr(settings, name)
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value < 2**63:
+            raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
+
+
 def _finite(name: str, value, *, positive: bool) -> float:
     """``value`` as a float, or a ``ValueError`` naming ``name``: finite and > 0 (``positive``) or >= 0. Written
     as ``not (x > 0)``, not ``x <= 0``: NaN fails every comparison (issue 16: NaN settings were accepted)."""
@@ -155,11 +164,8 @@ class DatasetSpec:
     curved: float = 0.0
 
     def __post_init__(self):
-        for name, low in (("scenes", 1), ("width", 16), ("height", 16), ("seed", 0), ("supersample", 1),
-                          ("near_draws", 0)):  # numpy's generators and the renderer take no other
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or not low <= value < 2**63:
-                raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
+        _integers(self, scenes=1, width=16, height=16, seed=0, supersample=1, near_draws=0)  # numpy's
+        # generators and the renderer take no other
         if not 0.0 <= self.curved <= 1.0:
             raise ValueError(f"curved: expected a probability in [0, 1], got {self.curved!r}")
         if not 0.0 <= self.test_fraction < 1.0:
@@ -221,10 +227,7 @@ class TrainConfig:
     pass_every: int | None = None
 
     def __post_init__(self):
-        for name, low in (("epochs", 1), ("batch", 1), ("seed", 0)):  # what torch and numpy take
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or not low <= value < 2**63:
-                raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
+        _integers(self, epochs=1, batch=1, seed=0)  # what torch and numpy take
         if self.pass_every is not None and (isinstance(self.pass_every, bool) or not isinstance(self.pass_every, int)
                                             or self.pass_every < 1):
             raise ValueError(f"pass_every: expected None or a positive number of epochs, got {self.pass_every!r}")
