@@ -11,6 +11,7 @@ is then 1. The folder is put in place whole when the video ends (``outputs.outpu
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import sys
 import time
@@ -36,9 +37,15 @@ def process_sequence(args: argparse.Namespace, step, out: Path, min_d: float | N
     def read(paths):
         return load_inputs(list(paths), rig=rig, cfa=args.cfa, colour=args.colour, reference=args.reference)
 
-    first = next((x for x in sequence.read_frames(files, read) if not isinstance(x, Exception)), None)
-    if first is None:  # no frame reads: say why the first one did not
-        read(files[0])
+    items = sequence.read_frames(files, read)
+    leading = []  # the frames read to build the pipeline (failures, then the first that reads): not read again
+    for item in items:
+        leading.append(item)
+        if not isinstance(item, Exception):
+            break
+    first = leading[-1]
+    if isinstance(first, Exception):  # no frame reads: say why the first one did not
+        raise leading[0]
     if first.kind in ("pair", "images") and max_d is None:
         raise ValueError("--max-disparity: required for ordinary images (the largest disparity searched, px)")
     step("pipeline set-up")
@@ -52,7 +59,7 @@ def process_sequence(args: argparse.Namespace, step, out: Path, min_d: float | N
     read_inputs = []  # each frame's Inputs (cropping, white level), consumed in step with the stream
 
     def frames():
-        for item in sequence.read_frames(files, read):
+        for item in itertools.chain(leading, items):
             read_inputs.append(item)
             yield item if isinstance(item, Exception) else item.frames.frames
 
