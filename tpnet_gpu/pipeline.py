@@ -341,7 +341,8 @@ class Pipeline:
 
 
 def _kept(result: DisparityResult | None, copy: DisparityResult | None) -> DisparityResult | None:
-    """``result``'s tensors in ``copy`` (written in place), or in a copy made now (the first frame)."""
+    """``result``'s tensors in ``copy`` (written in place), or in a copy made now (the first frame); its other
+    fields (passes, motion) as they are."""
     if result is None:
         return None
     tensors = [f.name for f in fields(DisparityResult) if torch.is_tensor(getattr(result, f.name))]
@@ -349,7 +350,7 @@ def _kept(result: DisparityResult | None, copy: DisparityResult | None) -> Dispa
         return replace(result, **{name: getattr(result, name).clone() for name in tensors})
     for name in tensors:
         getattr(copy, name).copy_(getattr(result, name))
-    return copy
+    return replace(result, **{name: getattr(copy, name) for name in tensors})
 
 
 def _most_confident(keep: torch.Tensor, confidence: torch.Tensor, tiebreak: torch.Tensor,

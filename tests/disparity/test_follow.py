@@ -77,3 +77,67 @@ def test_stream_follows_refreshes_and_restarts_after_a_bad_frame(frame):
     assert passes[4 + REFRESH - 1] < 0.6 * searched and passes[4 + REFRESH] == pytest.approx(searched)  # refresh
     plain = [r.tile_passes for r in pipeline.stream([frames] * 3)]
     assert plain == pytest.approx([searched] * 3)  # without follow every frame is searched
+
+
+# --- the rig's forward motion (follow.carried, follow.measured_motion). Oracle: the renderer's ground truth of a
+# scene seen before and after the rig stepped forward, and the step itself (k = t_z / (B f)).
+# A VGA frame: the small RIG's demo scene has few near tiles, and an answer's 0.2 px (the followed frames' refinement
+# tolerance) at its largest disparity, 14 px, is 0.001 in 1/d - a third of k
+VGA, STEP_MM = Rig(width=640, height=480), 1500.0
+
+
+@pytest.fixture(scope="module")
+def forward():
+    """Three frames of the demo scene as a rig stepping ``STEP_MM`` forward per frame sees it, with their truths."""
+    from tpnet_gpu.scenes.motion import RigMotion, moved_scene  # noqa: PLC0415
+
+    scene, out = demo_scene(VGA, seed=5), []
+    for k in range(3):
+        rendered = render(scene, VGA, sensor=Sensor(), supersample=1, seed=5 + k)
+        out.append((rendered.raws.astype(np.float32) - rendered.sensor.black_level, rendered))
+        scene = moved_scene(scene, RigMotion(translation=(0.0, 0.0, -STEP_MM)))
+    return out
+
+
+def _near(d, truth, tolerance=0.5) -> float:
+    """Share of the tiles with ground truth of 2 px or more (near enough for the step to move them: the demo's
+    sky and far hills are most of the frame) whose ``d`` is within ``tolerance`` px of it."""
+    known = np.isfinite(truth) & (truth >= 2.0)
+    return float(np.mean(np.abs(np.nan_to_num(d, nan=1e9)[known] - truth[known]) <= tolerance))
+
+
+def test_carried_answers_meet_the_moved_rigs_truth(forward):
+    from tpnet_gpu.disparity.follow import carried  # noqa: PLC0415
+    import torch  # noqa: PLC0415
+
+    before, after = forward[0][1].tile_disparity, forward[1][1].tile_disparity
+    k = STEP_MM / (VGA.baseline_mm * VGA.focal_px)
+    moved = carried(torch.from_numpy(before.astype(np.float32)), k).numpy()
+    # measured when written: 0.38 unmoved, 0.88 carried (the rest: edges the step uncovered)
+    assert _near(before, after) < 0.5  # the step matters
+    assert _near(moved, after) > 0.8
+    assert np.array_equal(carried(torch.from_numpy(before.astype(np.float32)), 0.0).numpy(), before.astype(
+        np.float32), equal_nan=True)
+
+
+@pytest.mark.slow
+def test_a_stream_measures_the_rigs_forward_step_and_a_still_rig_none(forward):
+    pipeline = Pipeline(VGA.height, VGA.width, rig=VGA, device="cpu", config=PipelineConfig(textures=False))
+    results = [r.engine.motion for r in pipeline.stream([f for f, _ in forward], follow=True)]
+    k = STEP_MM / (VGA.baseline_mm * VGA.focal_px)
+    assert results[0] == 0.0  # a searched frame measures nothing
+    # measured when written: 0.99 k and 1.00 k
+    assert results[1] == pytest.approx(k, rel=0.1) and results[2] == pytest.approx(k, rel=0.1)
+    still = [r.engine.motion for r in pipeline.stream([forward[0][0]] * 3, follow=True)]
+    assert abs(still[1]) < 0.05 * k and abs(still[2]) < 0.05 * k
+
+
+def test_the_kept_answers_carry_the_measured_motion(frame):
+    from dataclasses import replace  # noqa: PLC0415
+
+    from tpnet_gpu.pipeline import _kept  # noqa: PLC0415
+
+    engine = DisparityEngine(RIG.height, RIG.width, rig=RIG, device="cpu")
+    first = _kept(replace(engine.run(frame[0]), motion=0.001), None)
+    second = _kept(replace(engine.run(frame[0]), motion=0.002), first)  # written into the first's copy
+    assert second.disparity is first.disparity and (first.motion, second.motion) == (0.001, 0.002)

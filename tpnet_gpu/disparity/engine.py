@@ -23,7 +23,7 @@ import torch
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig, disparity_range
 from tpnet_gpu.disparity import budget
-from tpnet_gpu.disparity.follow import FOLLOW_TOLERANCE, follow
+from tpnet_gpu.disparity.follow import FOLLOW_TOLERANCE, follow, measured_motion
 from tpnet_gpu.disparity.grid import fill, neighbourhood, ring_median, settle, two_depth
 from tpnet_gpu.disparity.measure import CHUNK, Measurer, row_chunks
 from tpnet_gpu.disparity.occlusion import Occlusion, lowest
@@ -368,7 +368,8 @@ class DisparityEngine:
         disparity = fill(disparity, strength, found, (margin >= self.config.verify_margin) & self.read_finite)
         flagged = two_depth(disparity)
         confidence = torch.where(flagged, TWO_DEPTH_WEIGHT * strength, strength)
-        return DisparityResult(disparity, strength, confidence, flagged, found, margin, passes)
+        motion = 0.0 if previous is None else measured_motion(previous, disparity, strength, self.config.min_strength)
+        return DisparityResult(disparity, strength, confidence, flagged, found, margin, passes, motion)
 
     def leash(self, disparity: torch.Tensor, found: torch.Tensor, margin: torch.Tensor) -> torch.Tensor:
         """``disparity (ty, tx)`` with the first stage's answer back where refinement strayed more than

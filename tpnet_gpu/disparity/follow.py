@@ -8,6 +8,13 @@ pass at that answer no longer shows a peak within reach: the surface moved more 
 (sky, no texture) are not swept: the per-frame search would find no peak there either. What a followed frame
 cannot see - a new object in front of such a tile - comes back with the next full search, which a stream runs
 every ``REFRESH`` frames.
+
+Where the rig moves forward the previous answers are carried by that motion first (``carried``): a point at
+disparity d comes nearer by the factor 1 / (1 - k d) (k = t_z / (B f), 1/px, the rig's forward step over baseline
+times focal length) in disparity and in its distance from the image centre. k is measured on each followed frame
+(``measured_motion``: the change of 1/d between the start and the answer, a weighted median over the tiles) and
+used on the next (the rig keeps its speed). Sideways motion and turns are not modelled: at a fixed pixel they
+leave a surface's disparity as it was, and the lost tiles' sweep catches its edges (disparity.md §11).
 """
 
 from __future__ import annotations
@@ -23,11 +30,64 @@ REFRESH = 8  # a stream runs the full search on every REFRESH-th frame (and on i
 # RMSE at 0.1: 1.59 / 13.0 % / 0.108 px; 0.2: 1.43 / 12.9 % / 0.108; 0.3: 1.38 / 13.0 % / 0.109 (every frame
 # searched: 4.12 / 13.6 % / 0.108): the first pass, already at the last frame's answer, is read near its peak
 FOLLOW_TOLERANCE = 0.2
+# the most a carried answer's disparity may grow or shrink in one frame: a k measured across a cut (a new scene)
+# or on few tiles must not throw the starts out of the range they were read in
+CARRY_BOUNDS = (2.0 / 3.0, 1.5)
+MOTION_TILES = 16  # tiles with answers in both frames needed to measure k (else the last k is kept)
+MOTION_LEAST = 1.0  # px: tiles nearer to infinity say little of k (their 1/d is noise)
 
 
 def start_of(previous: DisparityResult) -> torch.Tensor:
-    """``(ty, tx)``: the previous frame's answer, its first stage's where refinement left none."""
+    """``(ty, tx)``: the previous frame's answer (its first stage's where refinement left none), carried by the
+    rig's forward motion ``previous.motion``."""
+    return carried(_answer(previous), previous.motion)
+
+
+def _answer(previous: DisparityResult) -> torch.Tensor:
     return torch.where(torch.isfinite(previous.disparity), previous.disparity, previous.search)
+
+
+def carried(disparity: torch.Tensor, motion: float) -> torch.Tensor:
+    """``(ty, tx)``: ``disparity (ty, tx)`` as the rig sees it after a forward step ``motion`` (k, 1/px): each
+    tile's d becomes d / (1 - k d) and moves that much further from the image centre; where two land on one tile
+    the nearer (larger d) wins; a tile nothing lands on keeps its own answer, scaled. NaN stays NaN; ``motion``
+    0 returns ``disparity`` itself."""
+    if motion == 0:
+        return disparity
+    ty, tx = disparity.shape
+    scale = (1.0 / (1.0 - motion * disparity)).clamp(*CARRY_BOUNDS)  # NaN for NaN; 1 - k d <= 0 clamps
+    scaled = disparity * scale
+    y = (8 * torch.arange(ty, device=disparity.device, dtype=disparity.dtype) + 4)[:, None]
+    x = (8 * torch.arange(tx, device=disparity.device, dtype=disparity.dtype) + 4)[None, :]
+    row = torch.round(((y - 4 * ty) * scale + 4 * ty - 4) / 8)  # the centre (W / 2, H / 2) = (4 tx, 4 ty) px
+    col = torch.round(((x - 4 * tx) * scale + 4 * tx - 4) / 8)
+    inside = torch.isfinite(scaled) & (row >= 0) & (row < ty) & (col >= 0) & (col < tx)
+    landed = torch.full((ty * tx,), float("-inf"), device=disparity.device, dtype=disparity.dtype)
+    index = (row * tx + col)[inside].long()
+    landed.scatter_reduce_(0, index, scaled[inside], "amax")
+    landed = landed.view(ty, tx)
+    return torch.where(torch.isfinite(landed), landed, scaled)
+
+
+def measured_motion(previous: DisparityResult, disparity: torch.Tensor, strength: torch.Tensor,
+                    min_strength: float) -> float:
+    """k (1/px) of the frame just followed from ``previous``, its answers ``disparity (ty, tx)``: from
+    ``previous.motion``, twice k += what ``previous``'s answers carried by k missed, 1/carried - 1/d, over the tiles
+    measured (``strength`` >= ``min_strength``) at ``MOTION_LEAST`` px or more, its median weighted by d^2 (the
+    noise of 1/d falls as 1/d^2). Twice: at a fixed pixel a near surface's edge moves outward over the background
+    as the rig nears it, so the change there is more than k; carried by the first estimate, the edges meet."""
+    answer, motion = _answer(previous), previous.motion
+    for _ in range(2):
+        start = carried(answer, motion)
+        ok = (strength >= min_strength) & (start >= MOTION_LEAST) & (disparity >= MOTION_LEAST)  # False for NaN
+        if int(ok.sum()) < MOTION_TILES:
+            return motion
+        d = disparity[ok].double()
+        missed = 1.0 / start[ok].double() - 1.0 / d
+        order = torch.argsort(missed)
+        weight = torch.cumsum((d * d)[order], 0)
+        motion += float(missed[order][int(torch.searchsorted(weight, 0.5 * weight[-1]))])
+    return motion
 
 
 def follow(engine, previous: DisparityResult) -> tuple[torch.Tensor, torch.Tensor, float]:

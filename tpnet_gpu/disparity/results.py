@@ -22,6 +22,8 @@ class DisparityResult:
         search: the first stage's answer (before refinement), px.
         margin: the first stage's aggregated-cost margin to the best choice > 1 px away (larger = surer).
         tile_passes: tiles x cameras processed, in full-resolution passes.
+        motion: the rig's forward step k (1/px, ``disparity.follow``) measured from the frame before (0 on a
+            searched frame): the next followed frame starts from these answers carried by it.
     """
 
     disparity: torch.Tensor
@@ -31,6 +33,7 @@ class DisparityResult:
     search: torch.Tensor
     margin: torch.Tensor
     tile_passes: float
+    motion: float = 0.0
 
 
 @dataclass
