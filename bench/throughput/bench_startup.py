@@ -15,7 +15,8 @@ cold row). Each row gives medians of the process's wall time, its CPU time (user
 sensitive than the wall time to other load on the machine), the seconds the command itself reports (pipeline
 construction and the first frame: what start-up costs beyond the imports) and the kernels each run added to the
 cache (Taichi ``.tic`` files, Warp module folders: 0 when the cache was hit). The import floor is ``python -c
-"import tpnet_gpu.pipeline"`` (Python, NumPy, torch, Warp and the pipeline's modules).
+"import tpnet_gpu.pipeline"`` (Python, NumPy, torch, Warp and the pipeline's modules); the torch floor ``python -c
+"import torch"``, the part no one-shot that runs the engine (torch throughout) can go below.
 
 Prints a table and writes the numbers with machine information to JSON. Progress goes to stderr.
 """
@@ -39,6 +40,7 @@ log = common.logger("bench_startup")
 
 BACKENDS = ("default", "taichi", "warp")  # default: no --backend (the command's own choice for the frame size)
 IMPORT_FLOOR = "import tpnet_gpu.pipeline"
+TORCH_FLOOR = "import torch"
 _REPORTED = re.compile(r" in ([0-9.]+) s -> ")  # `tpnet process`: "processed ... frame ... in 1.2 s -> OUT: ..."
 
 
@@ -134,9 +136,10 @@ def main(argv=None) -> dict:
               "machine": common.machine_info(), "cache": args.cache}
     with tempfile.TemporaryDirectory(prefix="tpnet-startup-") as tmp:
         tmp = Path(tmp)
-        floor = [timed_child([sys.executable, "-c", IMPORT_FLOOR], os.environ.copy()) for _ in range(args.repeat)]
-        report["import_floor"] = {"wall_s": summary([f[0] for f in floor]), "cpu_s": summary([f[1] for f in floor])}
-        log(f"import floor ({IMPORT_FLOOR}): median {report['import_floor']['wall_s']['median']:.2f} s")
+        for key, code in (("torch_floor", TORCH_FLOOR), ("import_floor", IMPORT_FLOOR)):
+            floor = [timed_child([sys.executable, "-c", code], os.environ.copy()) for _ in range(args.repeat)]
+            report[key] = {"wall_s": summary([f[0] for f in floor]), "cpu_s": summary([f[1] for f in floor])}
+            log(f"{key.replace('_', ' ')} ({code}): median {report[key]['wall_s']['median']:.2f} s")
         for width, height in sizes:
             inputs = _inputs(tmp, width, height, args.pair)
             entry = {"width": width, "height": height, "backends": {}}
@@ -153,9 +156,9 @@ def main(argv=None) -> dict:
             report["sizes"].append(entry)
 
     header = ("frame / backend / cache", "wall s", "CPU s", "reported s", "kernels compiled")
-    floor = report["import_floor"]
-    table = [(f"import floor: {IMPORT_FLOOR}", f"{floor['wall_s']['median']:.2f}", f"{floor['cpu_s']['median']:.2f}",
-              "", "")]
+    table = [(f"{key.replace('_', ' ')}: {code}", f"{report[key]['wall_s']['median']:.2f}",
+              f"{report[key]['cpu_s']['median']:.2f}", "", "")
+             for key, code in (("torch_floor", TORCH_FLOOR), ("import_floor", IMPORT_FLOOR))]
     for entry in report["sizes"]:
         for backend, rows in entry["backends"].items():
             for kind, row in rows.items():

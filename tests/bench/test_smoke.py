@@ -304,7 +304,8 @@ def test_bench_startup(tmp_path, capsys):
 
     argv = ["--sizes", "32x32", "--backends", "warp", "--repeat", "2", "--cache", str(cache_dir().parent)]
     report, out, err = run_bench(bench_startup, argv, tmp_path, capsys)
-    assert {"bench", "sizes", "import_floor", "machine", "cache", "table"} <= set(report)
+    assert {"bench", "sizes", "import_floor", "torch_floor", "machine", "cache", "table"} <= set(report)
+    assert "torch floor: import torch" in out
     (entry,) = report["sizes"]
     assert (entry["width"], entry["height"]) == (32, 32) and list(entry["backends"]) == ["warp"]
     (row,) = entry["backends"]["warp"].values()
