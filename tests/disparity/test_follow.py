@@ -123,7 +123,9 @@ def test_carried_answers_meet_the_moved_rigs_truth(forward):
 @pytest.mark.slow
 def test_a_stream_measures_the_rigs_forward_step_and_a_still_rig_none(forward):
     pipeline = Pipeline(VGA.height, VGA.width, rig=VGA, device="cpu", config=PipelineConfig(textures=False))
-    results = [r.engine.motion for r in pipeline.stream([f for f, _ in forward], follow=True)]
+    out = list(pipeline.stream([f for f, _ in forward], follow=True))
+    results = [r.engine.motion for r in out]
+    assert out[2].tile_passes < 0.6 * out[0].tile_passes  # followed: a 1.5 m step per frame is no cut
     k = STEP_MM / (VGA.baseline_mm * VGA.focal_px)
     assert results[0] == 0.0  # a searched frame measures nothing
     # measured when written: 0.99 k and 1.00 k
@@ -141,3 +143,18 @@ def test_the_kept_answers_carry_the_measured_motion(frame):
     first = _kept(replace(engine.run(frame[0]), motion=0.001), None)
     second = _kept(replace(engine.run(frame[0]), motion=0.002), first)  # written into the first's copy
     assert second.disparity is first.disparity and (first.motion, second.motion) == (0.001, 0.002)
+
+
+@pytest.mark.slow
+def test_a_cut_is_searched_in_full_and_answered_as_a_searched_frame(frame):
+    # Oracle: a fresh engine's search of the frame after the cut (its answers and passes), and the ground truth.
+    from tpnet_gpu.scenes import random_scene  # noqa: PLC0415
+
+    other = render(random_scene(RIG, np.random.default_rng([500, 1])), RIG, sensor=Sensor(), supersample=1, seed=9)
+    cut = other.raws.astype(np.float32) - other.sensor.black_level
+    pipeline = Pipeline(RIG.height, RIG.width, rig=RIG, device="cpu", config=PipelineConfig(textures=False))
+    results = list(pipeline.stream([frame[0], frame[0], cut], follow=True))
+    searched = DisparityEngine(RIG.height, RIG.width, rig=RIG, device="cpu").run(cut)
+    assert results[1].tile_passes < 0.6 * results[0].tile_passes  # the same view: followed
+    assert results[2].tile_passes == pytest.approx(searched.tile_passes)
+    assert np.array_equal(results[2].engine.disparity.numpy(), searched.disparity.numpy(), equal_nan=True)

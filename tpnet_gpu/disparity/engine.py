@@ -23,7 +23,7 @@ import torch
 from tpnet_gpu.camera import Rig
 from tpnet_gpu.config import BASELINE_CORRELATION, CorrelationConfig, EngineConfig, disparity_range
 from tpnet_gpu.disparity import budget
-from tpnet_gpu.disparity.follow import FOLLOW_TOLERANCE, follow, measured_motion
+from tpnet_gpu.disparity.follow import FOLLOW_TOLERANCE, continues, follow, measured_motion, view
 from tpnet_gpu.disparity.grid import fill, neighbourhood, ring_median, settle, two_depth
 from tpnet_gpu.disparity.measure import CHUNK, Measurer, row_chunks
 from tpnet_gpu.disparity.occlusion import Occlusion, lowest
@@ -353,9 +353,11 @@ class DisparityEngine:
     def run(self, frames, previous: DisparityResult | None = None) -> DisparityResult:
         """The whole engine on one frame ``(cams, H, W)`` (torch on any device or NumPy, any real dtype);
         ``previous``: this engine's result on the frame before (a video): the first stage follows it
-        (``disparity.follow``) instead of searching the whole range."""
+        (``disparity.follow``) instead of searching the whole range - unless this frame is a cut (``continues``)."""
         frames_t = self.normalise(frames)
         self.tp.load(frames_t)
+        seen = view(frames_t)
+        previous = continues(previous, seen)  # None after a cut: searched
         self.read_finite.fill_(False)
         found, margin, passes = self.search() if previous is None else follow(self, previous)
         disparity, strength, refine_passes = self.refine(found, self.first,
@@ -369,7 +371,7 @@ class DisparityEngine:
         flagged = two_depth(disparity)
         confidence = torch.where(flagged, TWO_DEPTH_WEIGHT * strength, strength)
         motion = 0.0 if previous is None else measured_motion(previous, disparity, strength, self.config.min_strength)
-        return DisparityResult(disparity, strength, confidence, flagged, found, margin, passes, motion)
+        return DisparityResult(disparity, strength, confidence, flagged, found, margin, passes, motion, seen)
 
     def leash(self, disparity: torch.Tensor, found: torch.Tensor, margin: torch.Tensor) -> torch.Tensor:
         """``disparity (ty, tx)`` with the first stage's answer back where refinement strayed more than

@@ -24,6 +24,8 @@ class DisparityResult:
         tile_passes: tiles x cameras processed, in full-resolution passes.
         motion: the rig's forward step k (1/px, ``disparity.follow``) measured from the frame before (0 on a
             searched frame): the next followed frame starts from these answers carried by it.
+        view: the frame's first camera's 8x8 means (``follow.view``): the next frame is searched in full unless it
+            continues this one (``follow.continues``).
     """
 
     disparity: torch.Tensor
@@ -34,6 +36,7 @@ class DisparityResult:
     margin: torch.Tensor
     tile_passes: float
     motion: float = 0.0
+    view: torch.Tensor | None = None
 
 
 @dataclass
