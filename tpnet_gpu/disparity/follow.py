@@ -26,7 +26,7 @@ import torch
 import torch.nn.functional as F
 
 from tpnet_gpu.disparity.results import DisparityResult
-from tpnet_gpu.layout import TILE_STRIDE
+from tpnet_gpu.layout import TILE_CENTRE, TILE_STRIDE
 
 REFRESH = 8  # a stream runs the full search on every REFRESH-th frame (and on its first)
 # px: a followed frame's refinement stops where a pass moves a tile less than this (EngineConfig.tolerance, 0.03,
@@ -81,10 +81,12 @@ def carried(disparity: torch.Tensor, motion: float) -> torch.Tensor:
     ty, tx = disparity.shape
     scale = (1.0 / (1.0 - motion * disparity)).clamp(*CARRY_BOUNDS)  # NaN for NaN; 1 - k d <= 0 clamps
     scaled = disparity * scale
-    y = (8 * torch.arange(ty, device=disparity.device, dtype=disparity.dtype) + 4)[:, None]
-    x = (8 * torch.arange(tx, device=disparity.device, dtype=disparity.dtype) + 4)[None, :]
-    row = torch.round(((y - 4 * ty) * scale + 4 * ty - 4) / 8)  # the centre (W / 2, H / 2) = (4 tx, 4 ty) px
-    col = torch.round(((x - 4 * tx) * scale + 4 * tx - 4) / 8)
+    # tile centres and the image centre (W / 2, H / 2), px; a moved centre lands on the tile nearest to it
+    y = (TILE_STRIDE * torch.arange(ty, device=disparity.device, dtype=disparity.dtype) + TILE_CENTRE)[:, None]
+    x = (TILE_STRIDE * torch.arange(tx, device=disparity.device, dtype=disparity.dtype) + TILE_CENTRE)[None, :]
+    cy, cx = TILE_STRIDE * ty / 2, TILE_STRIDE * tx / 2
+    row = torch.round(((y - cy) * scale + cy - TILE_CENTRE) / TILE_STRIDE)
+    col = torch.round(((x - cx) * scale + cx - TILE_CENTRE) / TILE_STRIDE)
     inside = torch.isfinite(scaled) & (row >= 0) & (row < ty) & (col >= 0) & (col < tx)
     landed = torch.full((ty * tx,), float("-inf"), device=disparity.device, dtype=disparity.dtype)
     index = (row * tx + col)[inside].long()
