@@ -158,3 +158,13 @@ def test_a_cut_is_searched_in_full_and_answered_as_a_searched_frame(frame):
     assert results[1].tile_passes < 0.6 * results[0].tile_passes  # the same view: followed
     assert results[2].tile_passes == pytest.approx(searched.tile_passes)
     assert np.array_equal(results[2].engine.disparity.numpy(), searched.disparity.numpy(), equal_nan=True)
+
+
+def test_masked_pixels_do_not_make_a_cut(frame):
+    # A block of NaN pixels (a documented masked input) in every frame: the frames still follow each other (the
+    # views compared where both are finite); oracle: the passes of a searched frame.
+    frames = frame[0].copy()
+    frames[:, 40:80, 60:120] = np.nan
+    pipeline = Pipeline(RIG.height, RIG.width, rig=RIG, device="cpu", config=PipelineConfig(textures=False))
+    out = list(pipeline.stream([frames, frames], follow=True))
+    assert out[1].tile_passes < 0.6 * out[0].tile_passes

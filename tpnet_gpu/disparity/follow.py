@@ -17,7 +17,8 @@ used on the next (the rig keeps its speed). Sideways motion and turns are not mo
 leave a surface's disparity as it was, and the lost tiles' sweep catches its edges (disparity.md §11).
 
 A frame that does not continue the one before - a cut, another camera's feed - is searched in full: its first
-camera's 8x8 means (``view``) correlate with the frame before's less than ``CUT_ZNCC`` (``continues``).
+camera's 8x8 means (``view``) correlate with the frame before's less than ``CUT_ZNCC`` where both are finite
+(``continues``).
 """
 
 from __future__ import annotations
@@ -53,12 +54,17 @@ def view(frames: torch.Tensor) -> torch.Tensor:
 
 
 def continues(previous: DisparityResult | None, seen: torch.Tensor) -> DisparityResult | None:
-    """``previous`` if the frame whose ``view`` is ``seen`` continues it (ZNCC >= ``CUT_ZNCC``), else None: a cut
-    (also a frame or a previous view without variance, or with NaN)."""
+    """``previous`` if the frame whose ``view`` is ``seen`` continues it (ZNCC >= ``CUT_ZNCC`` over the cells
+    finite in both: masked pixels, NaN, do not end a video), else None: a cut - also where half the cells or more
+    are not finite in one of them, or either view is flat."""
     if previous is None or previous.view is None:
         return previous
-    a, b = previous.view - previous.view.mean(), seen - seen.mean()
-    return previous if float((a * b).sum() / (a.norm() * b.norm())) >= CUT_ZNCC else None  # NaN: a cut
+    both = torch.isfinite(previous.view) & torch.isfinite(seen)
+    if 2 * int(both.sum()) <= both.numel():
+        return None
+    a, b = previous.view[both], seen[both]
+    a, b = a - a.mean(), b - b.mean()
+    return previous if float((a * b).sum() / (a.norm() * b.norm())) >= CUT_ZNCC else None  # flat: NaN, a cut
 
 
 def start_of(previous: DisparityResult) -> torch.Tensor:
