@@ -57,6 +57,13 @@ def test_every_frame_is_measured_and_followed_frames_search_less(video, tmp_path
     other = json.loads((searched / "sequence.json").read_text())
     followed, full = ([r["tile_passes"] for r in rep["per_frame"]] for rep in (report, other))
     assert not other["follow"] and followed[0] == full[0]
+    # the frames say which followed: all but the first, none with --no-follow; and the forward motion each
+    # measured, k = 1/d before - 1/d now of the wall (measured when written: within 0.0005 of it; 0.001 is 0.05 px
+    # of disparity at d = 7)
+    assert [r["followed"] for r in report["per_frame"]] == [False, True, True, True]
+    assert not any(r["followed"] for r in other["per_frame"])
+    k = [r["forward_motion"] for r in report["per_frame"]]
+    assert k[0] == 0 and k[1:] == pytest.approx([1 / a - 1 / b for a, b in zip(SHIFTS, SHIFTS[1:])], abs=0.001)
     assert all(f < s for f, s in zip(followed[1:], full[1:])), (followed, full)
     assert sum(followed[1:]) < 0.7 * sum(full[1:]), (followed, full)  # measured: 0.55x (both engines follow)
     assert "searching" in capsys.readouterr().out

@@ -1,11 +1,12 @@
 """``tpnet process CAM0_DIR CAM1_DIR ...``: a video, one folder of frames per camera (``tpnet_gpu.io.sequence``).
 
 Each frame starts from the one before's answers (``Pipeline.stream(follow=True)``: the engine re-searches only the
-tiles whose answer no longer holds, with a full search on the first frame, every 8th and after a bad one);
-``--no-follow`` searches every frame. Output (docs/outputs.md §5): ``OUT/frame_NNNNN/`` with one frame's files
-each, and ``OUT/sequence.json`` (per frame: its files, seconds, tile passes, or the error that frame gave). A frame
-that cannot be read or processed is reported on stderr and in the JSON, the others are written; the exit status
-is then 1. The folder is put in place whole when the video ends (``outputs.output_folder``).
+tiles whose answer no longer holds, with a full search on the first frame, every 8th, after a bad one and on a
+cut); ``--no-follow`` searches every frame. Output (docs/outputs.md §5): ``OUT/frame_NNNNN/`` with one frame's
+files each, and ``OUT/sequence.json`` (per frame: its files, seconds, tile passes, whether it followed the frame
+before and the rig's forward motion it measured, or the error that frame gave). A frame that cannot be read or
+processed is reported on stderr and in the JSON, the others are written; the exit status is then 1. The folder is
+put in place whole when the video ends (``outputs.output_folder``).
 """
 
 from __future__ import annotations
@@ -86,7 +87,8 @@ def process_sequence(args: argparse.Namespace, step, out: Path, min_d: float | N
                                     per_pixel=args.per_pixel)
                 if args.two_surface:  # NaN where the tile shows one surface, as for one frame
                     frame_outputs.write_surfaces(sub, result.surfaces, inputs.frames)
-                record.update(folder=sub.name, tile_passes=round(float(result.tile_passes), 3))
+                record.update(folder=sub.name, tile_passes=round(float(result.tile_passes), 3),
+                              followed=result.engine.followed, forward_motion=result.engine.motion)
             records.append(record)
             start = time.perf_counter()
         summary = {"frames": len(records), "failed": failed, "follow": not args.no_follow, "method": what,

@@ -371,7 +371,8 @@ class DisparityEngine:
         flagged = two_depth(disparity)
         confidence = torch.where(flagged, TWO_DEPTH_WEIGHT * strength, strength)
         motion = 0.0 if previous is None else measured_motion(previous, disparity, strength, self.config.min_strength)
-        return DisparityResult(disparity, strength, confidence, flagged, found, margin, passes, motion, seen)
+        return DisparityResult(disparity, strength, confidence, flagged, found, margin, passes, motion, seen,
+                               previous is not None)
 
     def leash(self, disparity: torch.Tensor, found: torch.Tensor, margin: torch.Tensor) -> torch.Tensor:
         """``disparity (ty, tx)`` with the first stage's answer back where refinement strayed more than

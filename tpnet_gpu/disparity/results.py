@@ -26,6 +26,8 @@ class DisparityResult:
             searched frame): the next followed frame starts from these answers carried by it.
         view: the frame's first camera's 8x8 means (``follow.view``): the next frame is searched in full unless it
             continues this one (``follow.continues``).
+        followed: the first stage followed the frame before (False: it searched the whole range - a first frame,
+            a refresh, a cut, or no ``previous``).
     """
 
     disparity: torch.Tensor
@@ -37,6 +39,7 @@ class DisparityResult:
     tile_passes: float
     motion: float = 0.0
     view: torch.Tensor | None = None
+    followed: bool = False
 
 
 @dataclass
