@@ -86,18 +86,19 @@ def test_a_bad_frame_is_reported_and_the_others_are_written(tmp_path, capsys):
 @pytest.mark.parametrize("case, message", [
     ("counts", "expected the same number of frames in every camera folder"),
     ("empty", "expected frame files"),
+    ("range", "--max-disparity: required for ordinary images"),  # as for one frame of ordinary images
 ])
 def test_camera_folders_that_do_not_pair_up_are_one_line(tmp_path, capsys, case, message):
     for side in ("left", "right"):
         (tmp_path / side).mkdir()
     image = np.zeros((16, 24), dtype=np.uint8)
     Image.fromarray(image).save(tmp_path / "left" / "0.png")
-    if case == "counts":
-        for name in ("0.png", "1.png"):
+    if case != "empty":
+        for name in ("0.png", "1.png") if case == "counts" else ("0.png",):
             Image.fromarray(image).save(tmp_path / "right" / name)
     out = tmp_path / "o"
-    assert main(["process", str(tmp_path / "left"), str(tmp_path / "right"), "--max-disparity", "4",
-                 "--out", str(out)]) == 2
+    ranged = [] if case == "range" else ["--max-disparity", "4"]
+    assert main(["process", str(tmp_path / "left"), str(tmp_path / "right"), *ranged, "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err and not out.exists()
 

@@ -75,3 +75,17 @@ def one_shot_backend(backend: str | None, height: int, width: int) -> str | None
     if backend is not None or height * width > ONE_SHOT_PIXELS:
         return backend
     return "warp"
+
+
+def pipeline_for(args, inputs, min_d: float | None, max_d: float | None, backend: str | None):
+    """The ``Pipeline`` that ``tpnet process``'s options ask for, sized by ``inputs`` (``load_inputs``: one
+    frame's, or a video's first), on ``backend``; ordinary images without ``--max-disparity`` are refused."""
+    from tpnet_gpu.io.stereo_io import make_pipeline  # noqa: PLC0415 - torch and Warp on use
+
+    if inputs.kind in ("pair", "images") and max_d is None:  # the library's rule, said with the option's name
+        raise ValueError("--max-disparity: required for ordinary images (the largest disparity searched, px)")
+    return make_pipeline(inputs, min_disparity=min_d, max_disparity=max_d, weights=args.weights, device=args.device,
+                         backend=backend, two_surface=args.two_surface,
+                         cross_check=False if args.no_checks else None, min_confidence=args.min_confidence,
+                         keep_fraction=args.keep_fraction, per_pixel=True if args.per_pixel else None,
+                         method=args.method, memory_limit_gb=args.memory_limit, textures=not args.no_texture)

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from tpnet_gpu.cli.common import DEVICE_HELP, NO_FIGURES_HELP, ONE_SHOT_BACKEND_HELP, OVERWRITE_HELP, \
-    WEIGHTS_HELP, default, one_shot_backend, one_shot_threads, pixels, positive_gb
+    WEIGHTS_HELP, default, one_shot_backend, one_shot_threads, pipeline_for, pixels, positive_gb
 from tpnet_gpu.io import sequence, stereo_io  # light: the images are read on use
 
 # the library's defaults of the options that set how the inputs are read (one default per setting)
@@ -50,25 +50,17 @@ def _process(args: argparse.Namespace, step) -> int:
 
 
 def _claimed(args: argparse.Namespace, step, out: Path, min_d: float | None, max_d: float | None) -> int:
-    from tpnet_gpu.io.stereo_io import load_inputs, make_pipeline  # noqa: PLC0415 - torch and Warp on use
+    from tpnet_gpu.io.stereo_io import load_inputs  # noqa: PLC0415 - torch and Warp on use
     from tpnet_gpu.outputs import frame_outputs, output_folder  # noqa: PLC0415
 
     step("reading the inputs")
     inputs = load_inputs(args.inputs, rig=args.rig, cfa=args.cfa, colour=args.colour, reference=args.reference)
-    if inputs.kind in ("pair", "images") and max_d is None:  # the library's rule, said with the option's name
-        raise ValueError("--max-disparity: required for ordinary images (the largest disparity searched, px)")
     frames = inputs.frames
     (height, width), (h, w) = frames.padded, frames.size
     step("pipeline set-up")
     start = time.perf_counter()
     with one_shot_threads(height, width):
-        pipeline = make_pipeline(inputs, min_disparity=min_d, max_disparity=max_d, weights=args.weights,
-                                 device=args.device, backend=one_shot_backend(args.backend, height, width),
-                                 two_surface=args.two_surface,
-                                 cross_check=False if args.no_checks else None, min_confidence=args.min_confidence,
-                                 keep_fraction=args.keep_fraction, per_pixel=True if args.per_pixel else None,
-                                 method=args.method, memory_limit_gb=args.memory_limit,
-                                 textures=not args.no_texture)
+        pipeline = pipeline_for(args, inputs, min_d, max_d, one_shot_backend(args.backend, height, width))
         step("frame")
         result = pipeline.process(frames.frames)
     seconds = time.perf_counter() - start

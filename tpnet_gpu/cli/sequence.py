@@ -26,8 +26,9 @@ def frame_folder(index: int) -> str:
 
 def process_sequence(args: argparse.Namespace, step, out: Path, min_d: float | None, max_d: float | None) -> int:
     """Run ``tpnet process`` on the camera folders ``args.inputs`` (module docstring); ``out`` is claimed."""
+    from tpnet_gpu.cli.common import pipeline_for  # noqa: PLC0415
     from tpnet_gpu.io import rigfile, sequence  # noqa: PLC0415
-    from tpnet_gpu.io.stereo_io import load_inputs, make_pipeline  # noqa: PLC0415 - torch and Warp on use
+    from tpnet_gpu.io.stereo_io import load_inputs  # noqa: PLC0415 - torch and Warp on use
     from tpnet_gpu.outputs import frame_outputs, output_folder  # noqa: PLC0415
     from tpnet_gpu.pipeline import FrameError  # noqa: PLC0415
 
@@ -47,15 +48,8 @@ def process_sequence(args: argparse.Namespace, step, out: Path, min_d: float | N
     first = leading[-1]
     if isinstance(first, Exception):  # no frame reads: say why the first one did not
         raise leading[0]
-    if first.kind in ("pair", "images") and max_d is None:
-        raise ValueError("--max-disparity: required for ordinary images (the largest disparity searched, px)")
     step("pipeline set-up")
-    pipeline = make_pipeline(first, min_disparity=min_d, max_disparity=max_d, weights=args.weights,
-                             device=args.device, backend=args.backend, two_surface=args.two_surface,
-                             cross_check=False if args.no_checks else None, min_confidence=args.min_confidence,
-                             keep_fraction=args.keep_fraction, per_pixel=True if args.per_pixel else None,
-                             method=args.method, memory_limit_gb=args.memory_limit,
-                             textures=not args.no_texture)
+    pipeline = pipeline_for(args, first, min_d, max_d, args.backend)
     what = frame_outputs.method(pipeline)
     read_inputs = []  # each frame's Inputs (cropping, white level), consumed in step with the stream
 
