@@ -1,7 +1,7 @@
 """Start-up benchmark: a one-shot ``tpnet process`` of a small rendered scene, each in a fresh process.
 
     tpnet bench startup [--sizes 128x96 640x480] [--backends default taichi warp] [--repeat 3] [--cache DIR]
-                        [--pair] [--json out/bench_startup.json]
+                        [--pair] [--figures] [--json out/bench_startup.json]
     python -m tpnet_gpu.bench.throughput.bench_startup [same options]
 
 Per frame size a demo scene is rendered once (supersample 1, ``tpnet render``) - or with ``--pair`` a mono stereo
@@ -14,7 +14,9 @@ times with that cache (the warm row: median and best). With ``--cache DIR`` the 
 cold row). Each row gives medians of the process's wall time, its CPU time (user + system, every thread: less
 sensitive than the wall time to other load on the machine), the seconds the command itself reports (pipeline
 construction and the first frame: what start-up costs beyond the imports) and the kernels each run added to the
-cache (Taichi ``.tic`` files, Warp module folders: 0 when the cache was hit). The import floor is ``python -c
+cache (Taichi ``.tic`` files, Warp module folders: 0 when the cache was hit). The runs pass ``--no-figures``
+(start-up, not plots); ``--figures`` adds a warm row of the command as a user types it, its labelled figures
+written too ("warm, figures"). The import floor is ``python -c
 "import tpnet_gpu.pipeline"`` (Python, NumPy, torch, Warp and the pipeline's modules); the torch floor ``python -c
 "import torch"``, the part no one-shot that runs the engine (torch throughout) can go below.
 
@@ -72,18 +74,20 @@ def timed_child(command: list[str], env: dict) -> tuple[float, float, str]:
     return seconds, cpu, done.stdout
 
 
-def process_once(inputs: list, tmp: Path, backend: str, root: Path) -> dict:
+def process_once(inputs: list, tmp: Path, backend: str, root: Path, figures: bool = False) -> dict:
     """One ``tpnet process`` in a fresh process over the caches under ``root``, into a new output folder under
     ``tmp`` (the command refuses one that holds files): wall and reported seconds, and the kernels it added to
-    the caches."""
+    the caches. ``figures``: without ``--no-figures``."""
     before = cache_entries(root)
     out = Path(tempfile.mkdtemp(prefix="out-", dir=tmp))
     command = [sys.executable, "-m", "tpnet_gpu.cli", "process", *inputs, "--out", str(out), "--device", "cpu",
-               "--no-figures", *([] if backend == "default" else ["--backend", backend])]  # start-up, not plots
+               *([] if figures else ["--no-figures"]), *([] if backend == "default" else ["--backend", backend])]
     wall, cpu, stdout = timed_child(command, cache_env(root))
     reported = _REPORTED.search(stdout)
     if reported is None:
         raise RuntimeError(f"tpnet process printed no time: {stdout!r}")
+    if figures != ("disparity.png" in stdout):  # the row is what it says
+        raise RuntimeError(f"tpnet process {'wrote no' if figures else 'wrote'} figures: {stdout!r}")
     return {"wall_s": wall, "cpu_s": cpu, "reported_s": float(reported.group(1)),
             "new_kernels": cache_entries(root) - before}
 
@@ -123,6 +127,8 @@ def main(argv=None) -> dict:
                         help="kernel cache root shared by every run (default: a new one per backend, cold first)")
     parser.add_argument("--pair", action="store_true", help="a rendered mono stereo pair of PNG images instead of a "
                         "quad scene folder")
+    parser.add_argument("--figures", action="store_true", help="also a warm row with the command's figures (its "
+                        "default output)")
     parser.add_argument("--json", default="out/bench_startup.json", help="report file")
     args = parser.parse_args(argv)
     if args.repeat < 1:
@@ -152,6 +158,11 @@ def main(argv=None) -> dict:
                 warm = [process_once(inputs, tmp, backend, root) for _ in range(args.repeat)]
                 rows["warm"] = _row(warm)
                 log(f"{width}x{height} {backend} warm: median {rows['warm']['wall_s']['median']:.2f} s")
+                if args.figures:
+                    rows["warm, figures"] = _row([process_once(inputs, tmp, backend, root, figures=True)
+                                                  for _ in range(args.repeat)])
+                    log(f"{width}x{height} {backend} warm, figures: median "
+                        f"{rows['warm, figures']['wall_s']['median']:.2f} s")
                 entry["backends"][backend] = rows
             report["sizes"].append(entry)
 

@@ -312,10 +312,12 @@ def test_bench_startup(tmp_path, capsys):
     assert list(entry["backends"]["warp"]) == ["warm"] and len(row["new_kernels"]) == 2
     assert 0 < row["reported_s"]["median"] < row["wall_s"]["median"]
     assert "32x32 warp warm" in out and "[bench_startup]" in err
-    # --pair: a mono stereo pair of PNG images through `tpnet process LEFT RIGHT --max-disparity 64`
-    report, out, err = run_bench(bench_startup, [*argv[:-2], "--repeat", "1", "--pair", "--cache", argv[-1]],
-                                 tmp_path, capsys)
-    assert report["inputs"] == "mono pair" and "32x32 warp warm" in out
+    # --pair: a mono stereo pair of PNG images through `tpnet process LEFT RIGHT --max-disparity 64`; --figures:
+    # a second warm row with the command's figures
+    report, out, err = run_bench(bench_startup, [*argv[:-2], "--repeat", "1", "--pair", "--figures", "--cache",
+                                                 argv[-1]], tmp_path, capsys)
+    assert report["inputs"] == "mono pair" and "32x32 warp warm" in out and "32x32 warp warm, figures" in out
+    assert list(report["sizes"][0]["backends"]["warp"]) == ["warm", "warm, figures"]
 
 
 @pytest.mark.slow

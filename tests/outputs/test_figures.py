@@ -74,3 +74,58 @@ def test_correlation_grid_draws_each_cell_at_its_lags_with_labels(tmp_path, draw
     assert drawn_at == pytest.approx((-3.0, 2.0))
     with pytest.raises(ValueError, match="corr: expected shape"):
         figures.save_correlations(tmp_path / "d.png", corr[:1], [(4, 5), (6, 7)], [(0, 1)] * 3, title="s")
+
+
+@pytest.fixture
+def texts(monkeypatch):
+    """The texts matplotlib draws (titles, tick labels in view, axis and colour-bar labels), as it draws them."""
+    from matplotlib.text import Text
+
+    seen = {}
+    draw = Text.draw
+
+    def spy(self, renderer):
+        if self.get_visible() and self.get_text().strip():
+            seen[id(self)] = self
+        return draw(self, renderer)
+
+    monkeypatch.setattr(Text, "draw", spy)
+    return seen
+
+
+@pytest.mark.parametrize("size, columns, image_last", [((370, 463), 1, False), ((370, 463), 1, True),
+                                                       ((900, 300), 1, False), ((120, 960), 1, False),
+                                                       ((370, 463), 3, True)])
+def test_every_label_lies_inside_the_figure_and_off_the_other_panels(tmp_path, drawn, texts, size, columns,
+                                                                      image_last):
+    """Oracle: the renderer's own extents of every drawn text - inside the canvas (fixed margins, no layout engine
+    to move them), not over another panel's picture nor over another text. Tile maps with colour bars and the texture image, landscape,
+    portrait and a wide strip; one panel per figure (``tpnet process``'s) and the demo's 3-column grid."""
+    h, w = size
+    tiles = np.linspace(0.5, 150, (h // 8) * (w // 8)).reshape(h // 8, w // 8)
+    panels = [figures.Panel(tiles, "disparity: engine", "disparity", "px", "turbo"),
+              figures.Panel(tiles, "depth: engine", "depth Z", "m", "turbo_r", log=True),
+              figures.Panel(np.abs(tiles - 3), "|error|: engine", "|disparity - ground truth|", "px", "inferno", 0, 1)]
+    image = figures.Panel(np.zeros((h, w, 3), dtype=np.uint8), "texture at the final disparity")
+    panels = ([image] if image_last else panels[:1]) if columns == 1 else panels + panels[:2] + [image]
+    figures.save(tmp_path / "f.png", panels, title="scene s: ground truth vs engine", size=size, columns=columns)
+    (fig,) = drawn
+    renderer = fig.canvas.get_renderer()
+    canvas = fig.bbox
+    pictures = [ax for ax in fig.axes if ax.images and ax.get_label() != "<colorbar>"]
+    for text in texts.values():
+        box = text.get_window_extent(renderer)
+        assert canvas.x0 - 0.5 <= box.x0 and box.x1 <= canvas.x1 + 0.5, (text.get_text(), box, canvas)
+        assert canvas.y0 - 0.5 <= box.y0 and box.y1 <= canvas.y1 + 0.5, (text.get_text(), box, canvas)
+        for ax in pictures:  # its own titles and scales sit around it; any other text must stay off it
+            own = {id(t) for a in (ax, *ax.child_axes) for t in a.findobj(type(text))}
+            if id(text) in own:
+                continue
+            picture = ax.get_window_extent(renderer)
+            overlap = min(box.x1, picture.x1) - max(box.x0, picture.x0), min(box.y1, picture.y1) - max(box.y0, picture.y0)
+            assert min(overlap) <= 0.5, (text.get_text(), box, picture)
+    boxes = [(text.get_text(), text.get_window_extent(renderer)) for text in texts.values()]
+    for i, (name, box) in enumerate(boxes):  # nor on one another (a colour bar's label on the next panel's ticks)
+        for other, near in boxes[i + 1:]:
+            overlap = min(box.x1, near.x1) - max(box.x0, near.x0), min(box.y1, near.y1) - max(box.y0, near.y0)
+            assert min(overlap) <= 0.5, (name, other)
