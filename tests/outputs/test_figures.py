@@ -100,20 +100,24 @@ def _overlap(a, b) -> float:
 
 @pytest.mark.parametrize("size, columns, image_last", [((370, 463), 1, False), ((370, 463), 1, True),
                                                        ((900, 300), 1, False), ((120, 960), 1, False),
-                                                       ((370, 463), 3, True)])
+                                                       ((370, 463), 3, True), ((64, 960), 1, None)])
 def test_every_label_lies_inside_the_figure_and_off_the_other_panels(tmp_path, drawn, texts, size, columns,
                                                                       image_last):
     """Oracle: the renderer's own extents of every drawn text - inside the canvas (fixed margins, no layout engine
     to move them), not over another panel's picture nor over another text. Tile maps with colour bars and the
     texture image; landscape, portrait and a wide strip; one panel per figure (``tpnet process``'s) and the demo's
-    3-column grid. Tolerance 0.5 px (the extents are in fractional pixels)."""
+    3-column grid; five rows of a thin strip (``image_last`` None). Tolerance 0.5 px (the extents are in fractional
+    pixels)."""
     h, w = size
     tiles = np.linspace(0.5, 150, (h // 8) * (w // 8)).reshape(h // 8, w // 8)
     panels = [figures.Panel(tiles, "disparity: engine", "disparity", "px", "turbo"),
               figures.Panel(tiles, "depth: engine", "depth Z", "m", "turbo_r", log=True),
               figures.Panel(np.abs(tiles - 3), "|error|: engine", "|disparity - ground truth|", "px", "inferno", 0, 1)]
     image = figures.Panel(np.zeros((h, w, 3), dtype=np.uint8), "texture at the final disparity")
-    panels = ([image] if image_last else panels[:1]) if columns == 1 else panels + panels[:2] + [image]
+    if image_last is None:
+        panels = panels[:1] * 5
+    else:
+        panels = ([image] if image_last else panels[:1]) if columns == 1 else panels + panels[:2] + [image]
     figures.save(tmp_path / "f.png", panels, title="scene s: ground truth vs engine", size=size, columns=columns)
     (fig,) = drawn
     renderer = fig.canvas.get_renderer()
@@ -129,3 +133,13 @@ def test_every_label_lies_inside_the_figure_and_off_the_other_panels(tmp_path, d
     for i, (text, box) in enumerate(boxes):  # nor on one another (a colour bar's label on the next panel's ticks)
         for other, near in boxes[i + 1:]:
             assert _overlap(box, near) <= 0.5, (text.get_text(), other.get_text())
+
+
+def test_rows_of_a_strip_too_thin_for_labels_still_save(tmp_path):
+    """Five rows of a 16x960 picture: the fixed margins leave each row its picture's height (a figure whose
+    margins exceeded its height raised "bottom cannot be >= top" before)."""
+    tiles = np.linspace(0.5, 150, 2 * 120).reshape(2, 120)
+    panel = figures.Panel(tiles, "disparity: engine", "disparity", "px", "turbo")
+    path = figures.save(tmp_path / "s.png", [panel] * 5, title="s", size=(16, 960), columns=1)
+    with Image.open(path) as image:
+        assert image.size[0] == figures.WIDTH_IN * figures.DPI

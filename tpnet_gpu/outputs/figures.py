@@ -152,9 +152,10 @@ def save(path, panels, *, title: str, size=None, columns: int | None = None) -> 
     columns = columns or len(panels)
     rows = -(-len(panels) // columns)
     h, w = _pixels(panels[0], size)
-    # a panel: the picture (its aspect) plus room for the titles, tile scale and pixel labels
-    panel_height = WIDTH_IN * 0.8 * h / w + 1.6
-    width, height = WIDTH_IN * columns, panel_height * rows + 0.4
+    # each row: the picture (its aspect at 0.8 of the panel's width) and 0.3 in; the margins around and between
+    picture = WIDTH_IN * 0.8 * h / w + 0.3
+    m = MARGINS_IN
+    width, height = WIDTH_IN * columns, m["top"] + m["bottom"] + rows * picture + (rows - 1) * m["row"]
     fig = Figure(figsize=(width, height), dpi=DPI)
     FigureCanvasAgg(fig)
     fig.suptitle(title, fontsize=11, y=1 - 0.12 / height)
