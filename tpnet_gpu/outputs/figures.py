@@ -5,8 +5,8 @@ Every figure has a title (the scene, what is shown and the method), axes in pixe
 scale in tiles (top, right: pixel / 8), and for a tile map a colour bar labelled with the quantity and its unit.
 Tiles with no value (NaN, and +inf depth) are drawn in ``NO_VALUE`` grey, named in the colour bar's label.
 Figures are ``WIDTH_IN`` x (as tall as the picture needs) inches at ``DPI``, with fixed margins (``MARGINS_IN``)
-rather than matplotlib's constrained layout, which measures every tick label several times over: it took half of
-a figure's 0.22 s, and the figures ~1.1 s of a one-shot ``tpnet process`` on an image pair.
+rather than matplotlib's constrained layout, which measures every tick label several times over: it was half of
+each figure's ~0.23 s (docs/results.md §11: a VGA one-shot's five figures 1.8 -> 1.1 s).
 """
 
 from __future__ import annotations
