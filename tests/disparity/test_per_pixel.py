@@ -107,3 +107,31 @@ def test_zncc_matches_window_sums_in_float64(level):
     expected = _zncc_float64(left, moved, RADIUS)
     assert (expected[:, : d + RADIUS] == -1).all() and (expected[:, d + RADIUS:] > 0.5).mean() > 0.95
     np.testing.assert_allclose(z.numpy(), expected, atol=2e-5)
+
+
+@pytest.mark.parametrize("offset", [(1.0, 0.0), (0.0, -1.0), (0.6, 0.8)])
+def test_best_zncc_is_the_best_candidates_in_float64(offset):
+    # tiles of different disparities, some NaN: each pixel's ten candidates differ, so each candidate's window
+    # sums must be its own (the step reuses its buffers from one candidate to the next); oracle: every candidate
+    # field moved by SciPy's bilinear sampling and its ZNCC summed window by window in float64, the best kept
+    rng = np.random.default_rng(5)
+    h, w = 40, 64
+    other = gaussian_filter(rng.normal(size=(h, w)), 1.0) * 10 + 50
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    reference = map_coordinates(other, [ys - 3 * offset[1], xs - 3 * offset[0]], order=3, mode="nearest")
+    reference += rng.normal(scale=0.5, size=(h, w))  # the other camera sees it at disparity 3
+    tiles = torch.tensor(rng.uniform(1.0, 6.0, size=(h // 8, w // 8)), dtype=torch.float32)
+    tiles[1, 2] = tiles[3, 5] = float("nan")
+    _, z = per_pixel(torch.tensor(reference, dtype=torch.float32), torch.tensor(other, dtype=torch.float32), tiles,
+                     offset=offset)
+    fields = [blend_field(tiles, (h, w))] + [cell_field(tiles, (h, w), dy, dx)
+                                              for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+    best = np.full((h, w), -1.0)
+    for field in fields:
+        d = field.numpy().astype(np.float64)
+        at_x, at_y = xs - d * offset[0], ys - d * offset[1]
+        inside = (at_x >= 0) & (at_x <= w - 1) & (at_y >= 0) & (at_y <= h - 1)  # False where d is NaN
+        sampled = map_coordinates(other, [np.nan_to_num(at_y), np.nan_to_num(at_x)], order=1, mode="nearest")
+        best = np.maximum(best, _zncc_float64(reference, np.where(inside, sampled, np.nan), RADIUS))
+    assert (best > 0.5).mean() > 0.2  # the oracle is not all -1: the windows that match are compared too
+    np.testing.assert_allclose(z.numpy(), best, atol=5e-5)

@@ -25,16 +25,42 @@ MIN_ZNCC = 0.3  # a pixel whose best candidate correlates less has no value
 FLAT_VARIANCE = 1e-6  # relative to the image's variance: a window this flat has no ZNCC (it is 0 there)
 
 
-def _box(images: torch.Tensor, radius: int) -> torch.Tensor:
-    """``(n, h, w)`` means of ``images (n, h, w)`` over each pixel's (2 radius + 1)^2 window (edge-replicated), as
-    differences of running sums along each axis: 2.8x faster than ``avg_pool2d`` for a 7x7 window on 4 VGA
-    images. Float32 running sums lose ~1e-7 of a row's sum: the caller centres its images (``per_pixel``)."""
-    k = 2 * radius + 1
-    padded = F.pad(images[:, None], (radius,) * 4, mode="replicate")[:, 0]
-    rows = F.pad(padded.cumsum(-1), (1, 0))
-    rows = rows[..., k:] - rows[..., :-k]
-    cols = F.pad(rows.cumsum(-2), (0, 0, 1, 0))
-    return (cols[..., k:, :] - cols[..., :-k, :]) / (k * k)
+class _BoxMeans:
+    """Window means of up to 4 images at once, by running sums in one buffer it owns: ``(4, h + 2 radius + 1,
+    w + 2 radius + 1)``, a zero first row and column, then each image edge-replicated by ``radius``. The
+    callers write images into ``interior(i)`` and read ``means(n)``: the buffers are made once per
+    ``per_pixel`` call, not once per candidate (new padded tensors for every candidate's sums, and the checks
+    the range tests make redundant, took 40 % of the step: docs/results.md §12)."""
+
+    def __init__(self, shape: tuple[int, int], radius: int, device):
+        h, w = shape
+        self.h, self.w, self.r = h, w, radius
+        k = 2 * radius + 1
+        self.k = k
+        self.sums = torch.zeros((4, h + k, w + k), device=device)  # rows and columns of running sums
+        self.rows = torch.empty((4, h + k, w), device=device)
+        self.out = torch.empty((4, h, w), device=device)
+
+    def interior(self, i: int) -> torch.Tensor:
+        """``(h, w)`` view where image ``i`` goes."""
+        r = self.r
+        return self.sums[i, 1 + r: 1 + r + self.h, 1 + r: 1 + r + self.w]
+
+    def means(self, n: int) -> torch.Tensor:
+        """``(n, h, w)`` the means of images ``0..n-1`` over each pixel's (2 radius + 1)^2 window
+        (edge-replicated), as differences of running sums along each axis (2.8x faster than ``avg_pool2d`` for a
+        7x7 window on 4 VGA images). Float32 running sums lose ~1e-7 of a row's sum: the caller centres its
+        images (``per_pixel``). The view is overwritten by the next call."""
+        r, h, w, k = self.r, self.h, self.w, self.k
+        s = self.sums[:n]
+        s[:, 1: 1 + r, 1 + r: 1 + r + w] = s[:, 1 + r: 2 + r, 1 + r: 1 + r + w]  # replicate: top, bottom rows
+        s[:, 1 + r + h:, 1 + r: 1 + r + w] = s[:, r + h: 1 + r + h, 1 + r: 1 + r + w]
+        s[:, 1:, 1: 1 + r] = s[:, 1:, 1 + r: 2 + r]  # then left and right columns, corners included
+        s[:, 1:, 1 + r + w:] = s[:, 1:, r + w: 1 + r + w]
+        s.cumsum_(-1)  # row 0 and column 0 stay zero: the sums' leading zeros
+        rows = torch.sub(s[..., k:], s[..., :-k], out=self.rows[:n])
+        rows.cumsum_(-2)
+        return torch.sub(rows[:, k:], rows[:, :-k], out=self.out[:n]).div_(k * k)
 
 
 def cell_field(tiles: torch.Tensor, shape: tuple[int, int], dy: int, dx: int) -> torch.Tensor:
@@ -68,41 +94,67 @@ def blend_field(tiles: torch.Tensor, shape: tuple[int, int]) -> torch.Tensor:
 def warp(other: torch.Tensor, disparity: torch.Tensor, offset) -> torch.Tensor:
     """``(h, w)`` ``other`` sampled at (x - d * ox, y - d * oy), bilinear; NaN where that leaves the image or d
     is NaN."""
-    h, w = other.shape
-    ox, oy = (float(v) for v in offset)
-    xs = torch.arange(w, device=other.device, dtype=other.dtype)[None, :] - ox * disparity
-    ys = torch.arange(h, device=other.device, dtype=other.dtype)[:, None] - oy * disparity
-    inside = torch.isfinite(xs) & torch.isfinite(ys) & (xs >= 0) & (xs <= w - 1) & (ys >= 0) & (ys <= h - 1)
-    gx = 2 * torch.nan_to_num(xs, nan=0.0) / max(w - 1, 1) - 1
-    gy = 2 * torch.nan_to_num(ys, nan=0.0) / max(h - 1, 1) - 1
-    grid = torch.stack([gx, gy], dim=-1)[None]
-    sampled = F.grid_sample(other[None, None], grid, mode="bilinear", align_corners=True,
-                            padding_mode="border")[0, 0]
-    return torch.where(inside, sampled, torch.full_like(sampled, float("nan")))
+    return _Warp(other, offset)(disparity)
+
+
+class _Warp:
+    """``warp`` of one image by many disparity maps: the grid of the axis the offset does not move (a pair's rows)
+    and the sampling grid's buffer made once."""
+
+    def __init__(self, other: torch.Tensor, offset):
+        h, w = other.shape
+        self.other = other[None, None]
+        self.offset = tuple(float(v) for v in offset)
+        self.grid = torch.empty((1, h, w, 2), device=other.device, dtype=other.dtype)
+        self.index = (torch.arange(w, device=other.device, dtype=other.dtype)[None, :],
+                      torch.arange(h, device=other.device, dtype=other.dtype)[:, None])
+        for axis, (o, n) in enumerate(zip(self.offset, (w, h))):
+            if o == 0.0:  # at the pixel's own row (column) wherever d is finite
+                self.grid[0, ..., axis] = 2 * self.index[axis] / max(n - 1, 1) - 1
+
+    def __call__(self, disparity: torch.Tensor) -> torch.Tensor:
+        inside = None  # a NaN or infinite d, or coordinate, fails the range check
+        for axis, (o, n) in enumerate(zip(self.offset, self.other.shape[::-1])):
+            if o == 0.0:
+                continue
+            at = self.index[axis] - o * disparity
+            within = (at >= 0) & (at <= n - 1)
+            inside = within if inside is None else inside & within
+            self.grid[0, ..., axis] = 2 * torch.nan_to_num(at, nan=0.0) / max(n - 1, 1) - 1
+        if inside is None:  # a camera at the reference's own place
+            inside = torch.isfinite(disparity)
+        sampled = F.grid_sample(self.other, self.grid, mode="bilinear", align_corners=True,
+                                padding_mode="border")[0, 0]
+        return torch.where(inside, sampled, torch.full_like(sampled, float("nan")))
 
 
 class _Windows:
-    """Box means of the reference image, reused for every candidate."""
+    """The ZNCC of the reference image with moved images: the reference's window means made once, and the
+    window sums' buffers (``_BoxMeans``) reused for every candidate."""
 
     def __init__(self, reference: torch.Tensor, radius: int):
         self.radius = radius
         self.ref = reference
-        self.mean, square = _box(torch.stack([reference, reference * reference]), radius)
+        self.box = _BoxMeans(tuple(reference.shape), radius, reference.device)
+        self.box.interior(0).copy_(reference)
+        torch.mul(reference, reference, out=self.box.interior(1))
+        self.mean, square = self.box.means(2).clone()
         self.var = (square - self.mean ** 2).clamp_min(0)
         self.floor = FLAT_VARIANCE * float(reference.var()) + 1e-12
 
     def zncc(self, moved: torch.Tensor) -> torch.Tensor:
         """``(h, w)`` ZNCC of the reference with ``moved`` over each pixel's window; -1 where ``moved`` has NaN
         in the window."""
-        m = torch.nan_to_num(moved, nan=0.0)
-        # one pass over the four window sums (the NaN count is exact: small integers)
-        nans, mean, square, cross = _box(torch.stack([torch.isnan(moved).to(m.dtype), m, m * m, self.ref * m]),
-                                         self.radius)
-        var = (square - mean ** 2).clamp_min(0)
+        box = self.box
+        m = torch.nan_to_num(moved, nan=0.0, out=box.interior(1))
+        box.interior(0).copy_(torch.isnan(moved))  # the NaN count is exact: small integers
+        torch.mul(m, m, out=box.interior(2))
+        torch.mul(self.ref, m, out=box.interior(3))
+        nans, mean, square, cross = box.means(4)  # one pass over the four window sums
+        var = (square - mean ** 2).clamp_min_(0)
         cov = cross - self.mean * mean
-        denom = torch.sqrt(self.var * var).clamp_min(self.floor)
-        z = cov / denom
-        return torch.where(nans > 0.5 / (2 * self.radius + 1) ** 2, torch.full_like(z, -1.0), z)
+        z = cov.div_(torch.sqrt(self.var * var).clamp_min_(self.floor))
+        return z.masked_fill_(nans > 0.5 / (2 * self.radius + 1) ** 2, -1.0)
 
 
 def per_pixel(reference: torch.Tensor, other: torch.Tensor, tiles: torch.Tensor, *, offset=(1.0, 0.0),
@@ -113,19 +165,20 @@ def per_pixel(reference: torch.Tensor, other: torch.Tensor, tiles: torch.Tensor,
     Returns ``(disparity, zncc)``, each ``(h, w)`` float32: the chosen answer (NaN where no candidate reached
     ``min_zncc`` or all were NaN) and its ZNCC (-1 where none)."""
     level = reference.float().mean()  # both centred on it: ZNCC ignores offsets, and the window sums keep
-    reference = reference.float() - level  # their precision (``_box``)
+    reference = reference.float() - level  # their precision (``_BoxMeans``)
     other = other.float() - level
     tiles = tiles.float()
     shape = tuple(reference.shape)
     windows = _Windows(reference, radius)
+    moving = _Warp(other, offset)
     best = torch.full(shape, -1.0, device=reference.device)
     chosen = torch.full(shape, float("nan"), device=reference.device)
     candidates = [blend_field(tiles, shape)] + [
         cell_field(tiles, shape, dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
     for field in candidates:  # the blend first: a plain cell answer must beat it to win
-        z = windows.zncc(warp(other, field, offset))
-        better = torch.isfinite(field) & (z > best)
-        best = torch.where(better, z, best)
-        chosen = torch.where(better, field, chosen)
+        z = windows.zncc(moving(field))
+        better = z > best  # a NaN field moves no pixel: its windows' ZNCC is -1, never above the best
+        torch.where(better, z, best, out=best)
+        torch.where(better, field, chosen, out=chosen)
     chosen = torch.where(best >= min_zncc, chosen, torch.full_like(chosen, float("nan")))
     return chosen, best
