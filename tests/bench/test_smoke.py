@@ -342,6 +342,7 @@ def test_bench_video(tmp_path, capsys, pair):
     argv = ["--sequences", "1", "--frames", "2", "--width", "128", "--height", "96"] + (["--pair"] if pair else [])
     report, out, err = run_bench(bench_video, argv, tmp_path, capsys)
     assert report["rig"] == ("binocular, mono" if pair else "quad, Bayer")
+    assert report["per_pixel"] is pair  # a pair is checked per pixel, as `tpnet process LEFT_DIR RIGHT_DIR` does
     assert set(report["summary"]) == {"every frame searched", "following the frame before"}
     assert all(s["frames"] == 1 for s in report["summary"].values())
     followed, searched = (report["summary"][k]["passes"] for k in ("following the frame before",
