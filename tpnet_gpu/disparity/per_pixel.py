@@ -29,8 +29,8 @@ class _BoxMeans:
     """Window means of up to 4 images at once, by running sums in one buffer it owns: ``(4, h + 2 radius + 1,
     w + 2 radius + 1)``, a zero first row and column, then each image edge-replicated by ``radius``. The
     callers write images into ``interior(i)`` and read ``means(n)``: the buffers are made once per
-    ``per_pixel`` call, not once per candidate (new padded tensors for every candidate's sums, and the checks
-    the range tests make redundant, took 40 % of the step: docs/results.md §12)."""
+    ``per_pixel`` call, not once per candidate (new padded tensors for every candidate's sums were most of the
+    40 % of the step this and ``_Warp`` saved: docs/results.md §12)."""
 
     def __init__(self, shape: tuple[int, int], radius: int, device):
         h, w = shape
@@ -99,22 +99,23 @@ def warp(other: torch.Tensor, disparity: torch.Tensor, offset) -> torch.Tensor:
 
 class _Warp:
     """``warp`` of one image by many disparity maps: the grid of the axis the offset does not move (a pair's rows)
-    and the sampling grid's buffer made once."""
+    and the sampling grid's buffer made once; the range tests stand in for ``isfinite`` (NaN fails them)."""
 
     def __init__(self, other: torch.Tensor, offset):
         h, w = other.shape
         self.other = other[None, None]
         self.offset = tuple(float(v) for v in offset)
+        self.lengths = (w, h)  # along x, along y
         self.grid = torch.empty((1, h, w, 2), device=other.device, dtype=other.dtype)
         self.index = (torch.arange(w, device=other.device, dtype=other.dtype)[None, :],
                       torch.arange(h, device=other.device, dtype=other.dtype)[:, None])
-        for axis, (o, n) in enumerate(zip(self.offset, (w, h))):
+        for axis, (o, n) in enumerate(zip(self.offset, self.lengths)):
             if o == 0.0:  # at the pixel's own row (column) wherever d is finite
                 self.grid[0, ..., axis] = 2 * self.index[axis] / max(n - 1, 1) - 1
 
     def __call__(self, disparity: torch.Tensor) -> torch.Tensor:
         inside = None  # a NaN or infinite d, or coordinate, fails the range check
-        for axis, (o, n) in enumerate(zip(self.offset, self.other.shape[::-1])):
+        for axis, (o, n) in enumerate(zip(self.offset, self.lengths)):
             if o == 0.0:
                 continue
             at = self.index[axis] - o * disparity
